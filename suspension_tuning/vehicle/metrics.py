@@ -1,0 +1,257 @@
+"""Objective and constraint functions of Thoresson et al. 2009, Part 1 (eqs. 9-11).
+
+* :func:`f_ride` - eq. 9, scaled BS 6841 weighted RMS vertical accelerations.
+* :func:`f_hand` - eq. 10, scaled RMS roll velocity and first peak roll angle.
+* :func:`tyre_hop_constraints` - eq. 11, fraction of time each tyre is off the ground.
+* :func:`first_peak`, :func:`rms`, :func:`roll_rate_rms` - the signal metrics they use.
+
+Every function broadcasts over leading (batch) axes; time runs along the last axis.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+FZ_CONTACT_THRESHOLD_N = 1e-3
+"""Default threshold for "Fz == 0" in eq. 11, N [E].
+
+The tyre model clips its force at exactly 0 N when the tyre leaves the ground, so any
+threshold far below the static wheel load (~5 kN) and far above float round-off of a
+force of that size (5e3 N * 2.2e-16 ~ 1e-12 N) counts the same samples; 1 mN is 6-7
+orders of magnitude below the static load.
+"""
+
+FIRST_PEAK_MIN_FRACTION = 0.5
+"""Default: a local maximum of |roll| counts as the first peak only if it reaches this
+fraction of the largest |roll| in the window [E].  It rejects ripples (tyre and body
+vibration, numerical noise) before the main roll swing of the first lane change."""
+
+
+def rms(x: np.ndarray, axis: int = -1) -> np.ndarray:
+    """Return the root mean square along an axis.
+
+    Parameters
+    ----------
+    x : array_like
+        Signal, uniformly sampled along ``axis``.
+    axis : int
+        Time axis (default last).
+
+    Returns
+    -------
+    np.ndarray
+        ``sqrt(mean(x**2))``, same units as ``x``.
+    """
+    arr = np.asarray(x, dtype=float)
+    if arr.shape[axis] == 0:
+        raise ValueError('rms of an empty signal')
+    return np.sqrt(np.mean(arr * arr, axis=axis))
+
+
+def _window_mask(t_s: np.ndarray, t_window: tuple | None, shape: tuple) -> np.ndarray:
+    t = np.asarray(t_s, dtype=float)
+    if t.shape[-1] != shape[-1]:
+        raise ValueError(
+            f't_s has {t.shape[-1]} samples but the signal has {shape[-1]} along its last axis'
+        )
+    if t_window is None:
+        return np.broadcast_to(np.ones(t.shape, dtype=bool), shape)
+    t0 = np.asarray(t_window[0], dtype=float)[..., np.newaxis]
+    t1 = np.asarray(t_window[1], dtype=float)[..., np.newaxis]
+    if np.any(t1 <= t0):
+        raise ValueError(f't_window end must be after its start, got {t_window}')
+    mask = np.broadcast_to((t >= t0) & (t <= t1), shape)
+    if not np.all(mask.any(axis=-1)):
+        raise ValueError(f't_window {t_window} contains no samples of t_s')
+    return mask
+
+
+def roll_rate_rms(
+    roll_rate: np.ndarray, t_s: np.ndarray | None = None, t_window: tuple | None = None
+) -> np.ndarray:
+    """Return the RMS roll velocity over the manoeuvre (input of eq. 10).
+
+    Parameters
+    ----------
+    roll_rate : array_like
+        Roll rate history, shape (..., n_samples), uniformly sampled (any unit; the
+        result has the same unit: pass deg/s to feed :func:`f_hand`).
+    t_s : array_like, optional
+        Sample times in s, shape (n_samples,) or broadcastable to ``roll_rate``.
+    t_window : (float, float), optional
+        Start and end time in s of the averaging window (inclusive); scalars or arrays
+        broadcastable to the batch shape.  Whole record when omitted.
+
+    Returns
+    -------
+    np.ndarray
+        RMS over the window, shape (...).
+    """
+    p = np.asarray(roll_rate, dtype=float)
+    if t_window is None:
+        return rms(p)
+    if t_s is None:
+        raise ValueError('t_window needs t_s')
+    mask = _window_mask(t_s, t_window, p.shape)
+    return np.sqrt(np.sum(np.where(mask, p * p, 0.0), axis=-1) / np.sum(mask, axis=-1))
+
+
+def first_peak(
+    roll_deg: np.ndarray,
+    t_s: np.ndarray,
+    t_window: tuple,
+    min_fraction: float = FIRST_PEAK_MIN_FRACTION,
+) -> np.ndarray:
+    """Return the first peak of |roll| during the first lane change (input of eq. 10).
+
+    Within ``t_window`` the first local maximum of ``|roll|`` that reaches
+    ``min_fraction`` times the largest ``|roll|`` in the window is returned.  If the
+    window contains no such interior local maximum (``|roll|`` still rising at the end
+    of the window) the largest ``|roll|`` in the window is returned.
+
+    Parameters
+    ----------
+    roll_deg : array_like
+        Body roll angle in deg, shape (..., n_samples).
+    t_s : array_like
+        Sample times in s, shape (n_samples,) or broadcastable to ``roll_deg``.
+    t_window : (float, float)
+        Start and end of the first lane change in s (scalars or arrays broadcastable to
+        the batch shape).
+    min_fraction : float
+        Significance threshold, see :data:`FIRST_PEAK_MIN_FRACTION`.
+
+    Returns
+    -------
+    np.ndarray
+        First peak |roll| in deg, shape (...).
+    """
+    if not 0.0 <= min_fraction <= 1.0:
+        raise ValueError(f'min_fraction must lie in [0, 1], got {min_fraction}')
+    a = np.abs(np.asarray(roll_deg, dtype=float))
+    if a.shape[-1] < 3:
+        raise ValueError('first_peak needs at least 3 samples')
+    if not np.all(np.isfinite(a)):
+        raise ValueError('roll_deg contains NaN or inf')
+    mask = _window_mask(t_s, t_window, a.shape)
+    aw = np.where(mask, a, -np.inf)
+    peak_max = np.max(aw, axis=-1)
+    local = np.zeros(a.shape, dtype=bool)
+    # interior local maxima inside the window (plateaus count at their first sample)
+    local[..., 1:-1] = (aw[..., 1:-1] > aw[..., :-2]) & (aw[..., 1:-1] >= aw[..., 2:])
+    local &= mask & (aw >= min_fraction * peak_max[..., np.newaxis])
+    # a maximum on the window's last sample is not a completed peak
+    last = a.shape[-1] - 1 - np.argmax(mask[..., ::-1], axis=-1)
+    np.put_along_axis(local, last[..., np.newaxis], False, axis=-1)
+    has = local.any(axis=-1)
+    idx = np.argmax(local, axis=-1)
+    first = np.take_along_axis(a, idx[..., np.newaxis], axis=-1)[..., 0]
+    return np.where(has, first, peak_max)
+
+
+def f_ride(
+    a_rms_driver_mps2: np.ndarray,
+    a_rms_passenger_mps2: np.ndarray,
+    a_min: float = 0.7,
+    a_max: float = 4.4,
+) -> np.ndarray:
+    """Compute the ride comfort objective, eq. 9.
+
+    ``f_ride = ((a_d - a_min)/(a_max - a_min) + (a_p - a_min)/(a_max - a_min)) / 2``.
+
+    Parameters
+    ----------
+    a_rms_driver_mps2, a_rms_passenger_mps2 : array_like
+        BS 6841 W_b weighted RMS vertical accelerations in m/s^2 (driver, passenger).
+    a_min, a_max : float
+        Scaling range in m/s^2, the paper's corner values 0.7 and 4.4 [P].
+
+    Returns
+    -------
+    np.ndarray
+        Scaled objective (0 at a_min, 1 at a_max).
+    """
+    if a_max <= a_min:
+        raise ValueError(f'a_max ({a_max}) must exceed a_min ({a_min})')
+    ad = np.asarray(a_rms_driver_mps2, dtype=float)
+    ap = np.asarray(a_rms_passenger_mps2, dtype=float)
+    span = a_max - a_min
+    return ((ad - a_min) / span + (ap - a_min) / span) / 2.0
+
+
+def f_hand(
+    roll_rate_rms_deg_s: np.ndarray,
+    roll_first_peak_deg: np.ndarray,
+    rate_min_deg_s: float = 0.8,
+    rate_max_deg_s: float = 5.7,
+    peak_min_deg: float = 1.4,
+    peak_max_deg: float = 12.2,
+) -> np.ndarray:
+    """Compute the handling objective, eq. 10.
+
+    ``f_hand = ((r - 0.8) 0.9/(5.7 - 0.8) + 0.1 + (p - 1.4) 0.9/(12.2 - 1.4) + 0.1) / 2``
+    with r the RMS roll velocity (deg/s) and p the first peak roll angle (deg).  Each term
+    is 0.1 at its minimum and 1.0 at its maximum.
+
+    Parameters
+    ----------
+    roll_rate_rms_deg_s : array_like
+        RMS roll velocity over the whole double lane change, deg/s.
+    roll_first_peak_deg : array_like
+        First peak roll angle in the first lane change, deg.
+    rate_min_deg_s, rate_max_deg_s, peak_min_deg, peak_max_deg : float
+        Scaling ranges [P eq. 10].
+
+    Returns
+    -------
+    np.ndarray
+        Scaled objective.
+    """
+    if rate_max_deg_s <= rate_min_deg_s or peak_max_deg <= peak_min_deg:
+        raise ValueError('f_hand scaling ranges must have max > min')
+    r = np.asarray(roll_rate_rms_deg_s, dtype=float)
+    p = np.asarray(roll_first_peak_deg, dtype=float)
+    term_r = (r - rate_min_deg_s) * 0.9 / (rate_max_deg_s - rate_min_deg_s) + 0.1
+    term_p = (p - peak_min_deg) * 0.9 / (peak_max_deg - peak_min_deg) + 0.1
+    return (term_r + term_p) / 2.0
+
+
+def tyre_hop_constraints(
+    fz_n: np.ndarray,
+    dt_s: float | np.ndarray,
+    fz_threshold_n: float = FZ_CONTACT_THRESHOLD_N,
+    max_fraction: float = 0.1,
+) -> np.ndarray:
+    """Compute the tyre hop constraints, eq. 11: ``g_i = 10 (t(Fz_i = 0)/t_total - 0.1) <= 0``.
+
+    Parameters
+    ----------
+    fz_n : array_like
+        Tyre vertical forces in N, shape (..., n_tyres, n_samples).
+    dt_s : float or array_like
+        Sample interval in s (uniform sampling), or per-sample durations of shape
+        (n_samples,) for non-uniform sampling (each sample weighted by its duration).
+    fz_threshold_n : float
+        A tyre counts as off the ground when ``Fz <= fz_threshold_n``; see
+        :data:`FZ_CONTACT_THRESHOLD_N`.
+    max_fraction : float
+        Permitted fraction of time off the ground, 0.1 [P section 5.3].
+
+    Returns
+    -------
+    np.ndarray
+        Constraint values, shape (..., n_tyres); <= 0 is feasible.
+    """
+    fz = np.asarray(fz_n, dtype=float)
+    if fz.ndim < 2:
+        raise ValueError(f'fz_n must have shape (..., n_tyres, n_samples), got {fz.shape}')
+    if fz.shape[-1] == 0:
+        raise ValueError('fz_n has no samples')
+    if np.any(np.isnan(fz)):
+        raise ValueError('fz_n contains NaN')
+    w = np.broadcast_to(np.asarray(dt_s, dtype=float), (fz.shape[-1],))
+    if np.any(~np.isfinite(w)) or np.any(w <= 0):
+        raise ValueError('dt_s must be positive and finite')
+    off = fz <= fz_threshold_n
+    fraction = np.sum(off * w, axis=-1) / np.sum(w)
+    return 10.0 * (fraction - max_fraction)
