@@ -1,0 +1,60 @@
+# suspension_tuning: the two commands a user needs on a fresh machine are
+#   make demo    (sets everything up, then runs the main job)
+#   make test    (sets everything up, then runs ruff and the test suite)
+# `make setup` is idempotent: stamps in .stamps/ make it take seconds when nothing changed.
+
+SHELL := /bin/bash
+.SHELLFLAGS := -eo pipefail -c
+
+PYTHON ?= python3.11
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMPS := .stamps
+
+# DDS discovery stays on loopback (multicast on the real network is forbidden here);
+# each run may pick its own domain.  The test session picks its own in test/conftest.py.
+export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
+export ROS_DOMAIN_ID ?= 42
+export RMW_IMPLEMENTATION := rmw_fastrtps_cpp
+export AMENT_PREFIX_PATH := $(abspath $(VENV))
+
+INTERFACE_FILES := $(shell find suspension_tuning_interfaces -type f)
+PIP_QUIET := 2>&1 | { grep -v -e 'is ignored: it is neither' -e '^$$' || true; }
+
+.PHONY: setup test lint demo bench clean
+
+setup: $(STAMPS)/package
+
+$(STAMPS)/venv:
+	@mkdir -p $(STAMPS)
+	$(PYTHON) -m venv $(VENV)
+	@touch $@
+
+$(STAMPS)/requirements: requirements.txt $(STAMPS)/venv
+	$(PY) -m pip install -q -r requirements.txt $(PIP_QUIET)
+	@touch $@
+
+$(STAMPS)/interfaces: $(STAMPS)/requirements $(INTERFACE_FILES) scripts/build_interfaces.sh
+	scripts/build_interfaces.sh $(VENV) build/interfaces
+	@touch $@
+
+$(STAMPS)/package: $(STAMPS)/interfaces setup.py setup.cfg package.xml resource/suspension_tuning \
+		$(wildcard config/*.yaml) scripts/install_ament_files.py
+	$(PY) -m pip install -q --no-deps --no-build-isolation -e . $(PIP_QUIET)
+	$(PY) scripts/install_ament_files.py $(VENV)
+	@touch $@
+
+lint: setup
+	$(VENV)/bin/ruff check .
+
+test: lint
+	$(PY) -m pytest test
+
+demo: setup
+	$(PY) -m suspension_tuning.demo
+
+bench: setup
+	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b; done
+
+clean:
+	rm -rf $(VENV) $(STAMPS) build *.egg-info

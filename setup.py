@@ -1,0 +1,32 @@
+"""ament_python package ``suspension_tuning`` (see README.md)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'suspension_tuning'
+
+# Executables: `ros2 run suspension_tuning <name>` (installed to lib/suspension_tuning
+# by setup.cfg under colcon; scripts/install_ament_files.py links them there in the venv).
+CONSOLE_SCRIPTS = [
+    'full_vehicle_sim = suspension_tuning.nodes.full_vehicle_sim:main',
+]
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*', 'benchmarks']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
+        (f'share/{PACKAGE}', ['package.xml']),
+        (f'share/{PACKAGE}/config', glob('config/*.yaml')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='suspension_tuning maintainers',
+    maintainer_email='maintainers@suspension-tuning.dev',
+    description='Dynamic-Q tuning of the 4S4 suspension of a Land Rover Defender 110.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={'console_scripts': CONSOLE_SCRIPTS},
+)
