@@ -1,0 +1,508 @@
+"""Road profiles: ISO 8608 random roads (left and right tracks), discrete bumps, flat road.
+
+ISO 8608 displacement PSD (one-sided, m^2 per cycle/m = m^3; physics-reference 6.1):
+
+    G_d(n) = G_d(n0) (n / n0)^(-w)
+
+The seed paper's Belgian paving has G_d(n0) = 1e-4 m^3 at n0 = 0.1 cycles/m and
+waviness ("terrain index") w = 4 [P section 5.2].
+
+Synthesis (physics-reference 6.3): sum of cosines with random phases on the harmonic grid
+``n_k = k / L`` of a road of length L, evaluated with an inverse real FFT.  Each
+component's power is the *integral* of G_d over its frequency cell (width 1/L, clipped to
+the band), so the profile's mean square over the whole (periodic) road equals the
+integral of G_d over the band exactly, and the periodogram equals the cell average of
+G_d.  The right track is ``Z_R = gamma Z_L + sqrt(1 - gamma^2) Z_2`` with an independent
+second phase set ``Z_2`` and the isotropic-surface coherence
+
+    gamma(n) = 2^(1 - nu) / Gamma(nu) x^nu K_nu(x),  nu = w / 2,  x = 2 pi n B
+
+for track width B (physics-reference 6.3), which keeps the PSD of each track and gives
+cross-spectrum ``gamma G_d`` (magnitude-squared coherence ``gamma^2``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+from scipy import special
+
+DEFAULT_CONFIG_PATH = Path(__file__).resolve().parents[2] / 'config' / 'road.yaml'
+"""config/road.yaml of the source tree."""
+
+COHERENCE_MODELS = ('isotropic', 'identical', 'independent')
+SIDES = ('left', 'right', 'centre')
+
+
+@dataclass(frozen=True)
+class RoadSpec:
+    """Specification of an ISO 8608 random road with two wheel tracks.
+
+    Attributes
+    ----------
+    gd_n0_m3 : float
+        Roughness coefficient G_d(n0), m^3 (m^2 per cycle/m).
+    n0_cyc_per_m : float
+        Reference spatial frequency, cycles/m.
+    waviness : float
+        Exponent w of the PSD slope (ISO 8608 uses 2 for classification).
+    n_min_cyc_per_m, n_max_cyc_per_m : float
+        Synthesised band, cycles/m.
+    track_m : float
+        Lateral distance between the left and right wheel tracks, m.
+    length_m : float
+        Road length, m (the profile is periodic with this period).
+    dx_m : float
+        Sample spacing, m.
+    seed : int
+        Seed of ``numpy.random.default_rng``; the same seed gives the same bits.
+    ramp_in_m : float
+        Length of a raised-cosine fade-in from z = 0 at x = 0, m (0 = none).  It avoids
+        an elevation step when the vehicle starts at rest on the road.
+    coherence_model : str
+        'isotropic' (physics-reference 6.3), 'identical' (z_right = z_left) or
+        'independent' (uncorrelated tracks).
+    """
+
+    gd_n0_m3: float = 1e-4
+    n0_cyc_per_m: float = 0.1
+    waviness: float = 4.0
+    n_min_cyc_per_m: float = 0.05
+    n_max_cyc_per_m: float = 10.0
+    track_m: float = 1.486
+    length_m: float = 300.0
+    dx_m: float = 0.01
+    seed: int = 8608
+    ramp_in_m: float = 0.0
+    coherence_model: str = 'isotropic'
+
+    def __post_init__(self) -> None:
+        """Check the values (ValueError with the field name)."""
+        for name in (
+            'gd_n0_m3',
+            'n0_cyc_per_m',
+            'waviness',
+            'n_min_cyc_per_m',
+            'n_max_cyc_per_m',
+            'track_m',
+            'length_m',
+            'dx_m',
+        ):
+            v = getattr(self, name)
+            if not isinstance(v, int | float) or not np.isfinite(v) or v <= 0:
+                raise ValueError(f'RoadSpec.{name} must be a positive finite number, got {v!r}')
+        if not isinstance(self.ramp_in_m, int | float) or not 0 <= self.ramp_in_m < self.length_m:
+            raise ValueError(f'RoadSpec.ramp_in_m must lie in [0, length_m), got {self.ramp_in_m}')
+        if not isinstance(self.seed, int | np.integer) or isinstance(self.seed, bool):
+            raise ValueError(f'RoadSpec.seed must be an integer, got {self.seed!r}')
+        if self.coherence_model not in COHERENCE_MODELS:
+            raise ValueError(
+                f'RoadSpec.coherence_model must be one of {COHERENCE_MODELS}, '
+                f'got {self.coherence_model!r}'
+            )
+        if self.n_max_cyc_per_m <= self.n_min_cyc_per_m:
+            raise ValueError('RoadSpec.n_max_cyc_per_m must exceed n_min_cyc_per_m')
+        if self.n_max_cyc_per_m > 0.5 / self.dx_m:
+            raise ValueError(
+                f'RoadSpec.n_max_cyc_per_m = {self.n_max_cyc_per_m} exceeds the Nyquist '
+                f'frequency 1/(2 dx) = {0.5 / self.dx_m} cycles/m'
+            )
+        if self.n_min_cyc_per_m * self.length_m < 1.0:
+            raise ValueError(
+                f'RoadSpec.length_m = {self.length_m} m is shorter than the longest '
+                f'wavelength 1/n_min = {1.0 / self.n_min_cyc_per_m} m'
+            )
+
+    @classmethod
+    def from_yaml_dict(cls, d: dict) -> RoadSpec:
+        """Build a spec from a mapping of field names (e.g. one entry of road.yaml).
+
+        Parameters
+        ----------
+        d : dict
+            Keys are field names of :class:`RoadSpec`; missing keys take the defaults.
+
+        Returns
+        -------
+        RoadSpec
+            The specification.
+
+        Raises
+        ------
+        ValueError
+            For unknown keys or invalid values.
+        """
+        if not isinstance(d, dict):
+            raise ValueError(f'road spec must be a mapping, got {type(d).__name__}')
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(d) - names)
+        if unknown:
+            raise ValueError(f'unknown RoadSpec keys {unknown}; valid keys: {sorted(names)}')
+        return cls(**d)
+
+
+def load_road_spec(name: str = 'belgian_paving', path: str | Path | None = None) -> RoadSpec:
+    """Load a named road specification from a YAML file (default config/road.yaml).
+
+    Parameters
+    ----------
+    name : str
+        Key of the road in the file's ``roads`` mapping.
+    path : str or Path, optional
+        YAML file; :data:`DEFAULT_CONFIG_PATH` when omitted.
+
+    Returns
+    -------
+    RoadSpec
+        The specification.
+    """
+    p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
+    with open(p, encoding='utf-8') as fh:
+        data = yaml.safe_load(fh)
+    roads = data.get('roads', {}) if isinstance(data, dict) else {}
+    if name not in roads:
+        raise ValueError(f'road {name!r} not found in {p}; available: {sorted(roads)}')
+    return RoadSpec.from_yaml_dict(roads[name])
+
+
+def iso8608_psd(n_cyc_per_m: np.ndarray, spec: RoadSpec) -> np.ndarray:
+    """Return the ISO 8608 displacement PSD G_d(n) in m^3 (zero outside the band).
+
+    Parameters
+    ----------
+    n_cyc_per_m : array_like
+        Spatial frequencies, cycles/m.
+    spec : RoadSpec
+        Road specification.
+
+    Returns
+    -------
+    np.ndarray
+        One-sided PSD, m^2/(cycle/m).
+    """
+    n = np.asarray(n_cyc_per_m, dtype=float)
+    inside = (n >= spec.n_min_cyc_per_m) & (n <= spec.n_max_cyc_per_m)
+    with np.errstate(divide='ignore'):
+        g = spec.gd_n0_m3 * (np.where(inside, n, 1.0) / spec.n0_cyc_per_m) ** (-spec.waviness)
+    return np.where(inside, g, 0.0)
+
+
+def _psd_integral(n_lo: np.ndarray, n_hi: np.ndarray, spec: RoadSpec) -> np.ndarray:
+    """Integral of G_d from n_lo to n_hi (closed form of the power law), m^2."""
+    w = spec.waviness
+    c = spec.gd_n0_m3 * spec.n0_cyc_per_m**w
+    if abs(w - 1.0) < 1e-12:
+        return c * np.log(n_hi / n_lo)
+    return c * (n_hi ** (1.0 - w) - n_lo ** (1.0 - w)) / (1.0 - w)
+
+
+def left_right_coherence(n_cyc_per_m: np.ndarray, track_m: float, waviness: float) -> np.ndarray:
+    """Return the coherence gamma(n) between two parallel tracks of an isotropic surface.
+
+    ``gamma = 2^(1 - nu) / Gamma(nu) x^nu K_nu(x)`` with ``nu = w/2`` and
+    ``x = 2 pi n B`` (physics-reference 6.3).  gamma -> 1 as n -> 0.  The magnitude-squared
+    coherence (as estimated by Welch's method) is gamma^2.
+
+    Parameters
+    ----------
+    n_cyc_per_m : array_like
+        Spatial frequencies, cycles/m (>= 0).
+    track_m : float
+        Track spacing B, m.
+    waviness : float
+        PSD exponent w (> 0).
+
+    Returns
+    -------
+    np.ndarray
+        gamma in [0, 1].
+    """
+    nu = waviness / 2.0
+    x = 2.0 * np.pi * np.asarray(n_cyc_per_m, dtype=float) * track_m
+    xs = np.where(x > 0, x, 1.0)
+    with np.errstate(over='ignore', under='ignore', invalid='ignore'):
+        g = 2.0 ** (1.0 - nu) / special.gamma(nu) * xs**nu * special.kv(nu, xs)
+    g = np.where(np.isfinite(g), g, 0.0)
+    return np.clip(np.where(x > 0, g, 1.0), 0.0, 1.0)
+
+
+def _check_side(side: str) -> str:
+    if side not in SIDES:
+        raise ValueError(f'side must be one of {SIDES}, got {side!r}')
+    return side
+
+
+@dataclass(frozen=True)
+class RoadProfile:
+    """Elevation of the left and right wheel tracks on a uniform x grid.
+
+    Attributes
+    ----------
+    x_m : np.ndarray
+        Longitudinal positions, m, shape (n,), strictly increasing and uniform.
+    z_left_m, z_right_m : np.ndarray
+        Elevations of the left and right tracks, m, shape (n,).
+    spec : RoadSpec or None
+        The specification the profile was synthesised from (None for bumps/flat roads).
+    """
+
+    x_m: np.ndarray
+    z_left_m: np.ndarray
+    z_right_m: np.ndarray
+    spec: RoadSpec | None = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        """Check shapes and monotonic x."""
+        x = np.asarray(self.x_m, dtype=float)
+        if x.ndim != 1 or x.size < 2:
+            raise ValueError('RoadProfile.x_m must be 1-D with at least 2 samples')
+        if np.shape(self.z_left_m) != x.shape or np.shape(self.z_right_m) != x.shape:
+            raise ValueError('RoadProfile z arrays must have the shape of x_m')
+        if not np.all(np.diff(x) > 0):
+            raise ValueError('RoadProfile.x_m must be strictly increasing')
+
+    @property
+    def length_m(self) -> float:
+        """Road length x_end - x_start, m."""
+        return float(self.x_m[-1] - self.x_m[0])
+
+    def centreline(self) -> np.ndarray:
+        """Return the left/right average (z_left + z_right)/2 in m, shape (n,).
+
+        Used by the pitch-plane ride model [P section 6.2].
+        """
+        return 0.5 * (np.asarray(self.z_left_m) + np.asarray(self.z_right_m))
+
+    def _track(self, side: str) -> np.ndarray:
+        side = _check_side(side)
+        if side == 'left':
+            return np.asarray(self.z_left_m)
+        if side == 'right':
+            return np.asarray(self.z_right_m)
+        return self.centreline()
+
+    def _check_x(self, x_m: np.ndarray) -> np.ndarray:
+        x = np.asarray(x_m, dtype=float)
+        if np.any(np.isnan(x)):
+            raise ValueError('road position contains NaN')
+        lo, hi = self.x_m[0], self.x_m[-1]
+        if np.any(x < lo) or np.any(x > hi):
+            raise ValueError(
+                f'road position outside the profile [{lo}, {hi}] m: '
+                f'min {np.min(x):.6g}, max {np.max(x):.6g}'
+            )
+        return x
+
+    def elevation(self, x_m: np.ndarray, side: str = 'left') -> np.ndarray:
+        """Return the elevation at positions ``x_m`` by linear interpolation.
+
+        Parameters
+        ----------
+        x_m : array_like
+            Positions along the road, m, any shape, inside [x_m[0], x_m[-1]].
+        side : str
+            'left', 'right' or 'centre'.
+
+        Returns
+        -------
+        np.ndarray
+            Elevation in m, shape of ``x_m``.
+        """
+        return np.interp(self._check_x(x_m), self.x_m, self._track(side))
+
+    def slope(self, x_m: np.ndarray, side: str = 'left') -> np.ndarray:
+        """Return dz/dx at positions ``x_m`` (piecewise constant between samples).
+
+        Multiply by the forward speed to get the road's vertical velocity (m/s), e.g.
+        for tyre damping.
+
+        Parameters
+        ----------
+        x_m : array_like
+            Positions along the road, m.
+        side : str
+            'left', 'right' or 'centre'.
+
+        Returns
+        -------
+        np.ndarray
+            Slope, dimensionless, shape of ``x_m``.
+        """
+        x = self._check_x(x_m)
+        xs = np.asarray(self.x_m, dtype=float)
+        seg = np.diff(self._track(side)) / np.diff(xs)
+        i = np.clip(np.searchsorted(xs, x, side='right') - 1, 0, seg.size - 1)
+        return seg[i]
+
+    def sample(self, distance_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return the left and right elevations at ``distance_m`` (linear interpolation).
+
+        Parameters
+        ----------
+        distance_m : array_like
+            Positions along the road, m, any shape (e.g. x0 + v t for a time grid).
+
+        Returns
+        -------
+        (np.ndarray, np.ndarray)
+            z_left, z_right in m, each of the shape of ``distance_m``.
+        """
+        x = self._check_x(distance_m)
+        return (
+            np.interp(x, self.x_m, self.z_left_m),
+            np.interp(x, self.x_m, self.z_right_m),
+        )
+
+
+def _ramp(x: np.ndarray, ramp_m: float) -> np.ndarray:
+    if ramp_m <= 0:
+        return np.ones_like(x)
+    r = np.clip(x / ramp_m, 0.0, 1.0)
+    return 0.5 * (1.0 - np.cos(np.pi * r))
+
+
+def synthesise_tracks(spec: RoadSpec) -> RoadProfile:
+    """Synthesise left and right ISO 8608 tracks (deterministic for a given seed).
+
+    Parameters
+    ----------
+    spec : RoadSpec
+        Road specification.
+
+    Returns
+    -------
+    RoadProfile
+        ``x_m = 0, dx, ..., N dx`` with ``N = round(length_m / dx_m)``; the last sample
+        repeats the first (the synthesised road is periodic with period N dx).
+    """
+    if not isinstance(spec, RoadSpec):
+        raise ValueError(f'spec must be a RoadSpec, got {type(spec).__name__}')
+    n_pts = int(round(spec.length_m / spec.dx_m))
+    period = n_pts * spec.dx_m
+    dn = 1.0 / period
+    k = np.arange(n_pts // 2 + 1)
+    n_k = k * dn
+    lo = np.clip(n_k - 0.5 * dn, spec.n_min_cyc_per_m, spec.n_max_cyc_per_m)
+    hi = np.clip(n_k + 0.5 * dn, spec.n_min_cyc_per_m, spec.n_max_cyc_per_m)
+    valid = (hi > lo) & (k > 0) & (k < n_pts / 2)  # no DC, no Nyquist bin
+    power = np.zeros(k.size)
+    power[valid] = _psd_integral(lo[valid], hi[valid], spec)  # variance per component
+    amp = np.sqrt(2.0 * power)  # cosine amplitude A_k, var = A_k^2 / 2
+
+    rng = np.random.default_rng(spec.seed)
+    phi_1 = rng.uniform(0.0, 2.0 * np.pi, k.size)
+    phi_2 = rng.uniform(0.0, 2.0 * np.pi, k.size)
+    scale = 0.5 * n_pts  # irfft: z = sum (2/N) |Z_k| cos(...)
+    z1 = scale * amp * np.exp(1j * phi_1)
+    z2 = scale * amp * np.exp(1j * phi_2)
+    if spec.coherence_model == 'isotropic':
+        gam = left_right_coherence(n_k, spec.track_m, spec.waviness)
+        zr = gam * z1 + np.sqrt(1.0 - gam**2) * z2
+    elif spec.coherence_model == 'identical':
+        zr = z1
+    else:
+        zr = z2
+    z_left = np.fft.irfft(z1, n=n_pts)
+    z_right = np.fft.irfft(zr, n=n_pts)
+    x = np.arange(n_pts + 1) * spec.dx_m
+    z_left = np.append(z_left, z_left[0])
+    z_right = np.append(z_right, z_right[0])
+    w = _ramp(x, spec.ramp_in_m)
+    return RoadProfile(x_m=x, z_left_m=z_left * w, z_right_m=z_right * w, spec=spec)
+
+
+def smooth_road(length_m: float, dx_m: float = 0.01) -> RoadProfile:
+    """Return a flat road (z = 0 on both tracks).
+
+    Parameters
+    ----------
+    length_m : float
+        Road length, m.
+    dx_m : float
+        Sample spacing, m.
+
+    Returns
+    -------
+    RoadProfile
+        Flat profile from x = 0 to about ``length_m``.
+    """
+    if not (np.isfinite(length_m) and np.isfinite(dx_m)) or length_m <= 0 or dx_m <= 0:
+        raise ValueError(f'length_m and dx_m must be positive, got {length_m}, {dx_m}')
+    n = max(int(round(length_m / dx_m)), 1)
+    x = np.arange(n + 1) * dx_m
+    return RoadProfile(x_m=x, z_left_m=np.zeros_like(x), z_right_m=np.zeros_like(x))
+
+
+def discrete_bump(
+    height_m: float,
+    bump_length_m: float,
+    x_start_m: float | list[float],
+    road_length_m: float,
+    dx_m: float = 0.01,
+    shape: str = 'half_sine',
+    side: str = 'both',
+    top_length_m: float = 0.0,
+) -> RoadProfile:
+    """Return a flat road with one or more discrete bumps.
+
+    Parameters
+    ----------
+    height_m : float
+        Bump height, m (negative for a pothole).
+    bump_length_m : float
+        Length of each bump along the road, m.
+    x_start_m : float or sequence of float
+        Start position(s) of the bump(s), m; bumps must not overlap.
+    road_length_m : float
+        Road length, m.
+    dx_m : float
+        Sample spacing, m.
+    shape : str
+        'half_sine' (z = h sin(pi s / L)) or 'trapezoid' (linear ramps either side of a
+        flat top of ``top_length_m``).
+    side : str
+        'both', 'left' or 'right' track.
+    top_length_m : float
+        Flat-top length for the trapezoid, m (< bump_length_m).
+
+    Returns
+    -------
+    RoadProfile
+        The profile.
+    """
+    if shape not in ('half_sine', 'trapezoid'):
+        raise ValueError(f"shape must be 'half_sine' or 'trapezoid', got {shape!r}")
+    if side not in ('both', 'left', 'right'):
+        raise ValueError(f"side must be 'both', 'left' or 'right', got {side!r}")
+    if not np.isfinite(height_m):
+        raise ValueError(f'height_m must be finite, got {height_m}')
+    if not np.isfinite(bump_length_m) or bump_length_m <= 0:
+        raise ValueError(f'bump_length_m must be positive, got {bump_length_m}')
+    if shape == 'trapezoid' and not 0 <= top_length_m < bump_length_m:
+        raise ValueError('top_length_m must lie in [0, bump_length_m)')
+    starts = np.sort(np.atleast_1d(np.asarray(x_start_m, dtype=float)))
+    if np.any(~np.isfinite(starts)) or np.any(starts < 0):
+        raise ValueError(f'x_start_m must be finite and >= 0, got {x_start_m}')
+    if np.any(np.diff(starts) < bump_length_m):
+        raise ValueError('bumps overlap: starts must be at least bump_length_m apart')
+    if starts[-1] + bump_length_m > road_length_m:
+        raise ValueError('the last bump ends beyond road_length_m')
+    flat = smooth_road(road_length_m, dx_m)
+    x = flat.x_m
+    z = np.zeros_like(x)
+    for x0 in starts:
+        s = x - x0
+        inside = (s >= 0) & (s <= bump_length_m)
+        if shape == 'half_sine':
+            zb = height_m * np.sin(np.pi * s / bump_length_m)
+        else:
+            ramp = 0.5 * (bump_length_m - top_length_m)
+            zb = height_m * np.clip(np.minimum(s, bump_length_m - s) / ramp, 0.0, 1.0)
+        z = np.where(inside, zb, z)
+    zl = z if side in ('both', 'left') else np.zeros_like(z)
+    zr = z if side in ('both', 'right') else np.zeros_like(z)
+    return RoadProfile(x_m=x, z_left_m=zl, z_right_m=zr)
