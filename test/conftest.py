@@ -35,6 +35,11 @@ DOMAIN_ID = 10 + os.getpid() % 90
 os.environ['ROS_DOMAIN_ID'] = str(DOMAIN_ID)
 os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
 os.environ.setdefault('ROS_LOG_DIR', tempfile.mkdtemp(prefix='suspension_tuning_roslog_'))
+# The venv is an ament prefix (make setup registers the package there), as a sourced
+# ROS workspace would be.
+_prefixes = os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)
+if sys.prefix not in _prefixes:
+    os.environ['AMENT_PREFIX_PATH'] = os.pathsep.join([sys.prefix, *filter(None, _prefixes)])
 
 
 def assert_loopback_only() -> None:
