@@ -9,10 +9,10 @@ pytestmark = pytest.mark.ros
 
 def test_node_answers_each_step_and_switches_after_the_valve_delay(ros_context, executor):
     from rclpy.node import Node
+    from suspension_tuning_interfaces.msg import ValveState, VehicleState
 
     from suspension_tuning.nodes.valve_controller import RELIABLE, ValveControllerNode
     from suspension_tuning.vehicle.valve_logic import HANDLING_STATE, RIDE_STATE
-    from suspension_tuning_interfaces.msg import ValveState, VehicleState
 
     node = ValveControllerNode(context=ros_context)
     client = Node('valve_test_client', context=ros_context)
