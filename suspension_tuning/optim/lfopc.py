@@ -62,6 +62,15 @@ from numpy.typing import ArrayLike, NDArray
 
 Array = NDArray[np.float64]
 
+_F_ROUNDING = 1e-12
+"""Relative rise of F below which the energy safeguard ignores it [E]: F is a
+sum of a few rounded terms, so changes below ~1e-12 |F| are rounding noise;
+without this margin the safeguard halved dt to zero at a converged point."""
+
+_DT_FLOOR = 1e-12
+"""A run whose time step fell below this fraction of the initial one is
+stopped as 'time step collapsed' (not counted as converged) [E]."""
+
 
 @dataclass(frozen=True)
 class LfopOptions:
@@ -224,9 +233,12 @@ def lfop(
             v_new = v + a_new * dt
             if fun is not None:
                 f_new = float(fun(x_new))
-                if f_new > f_x and v_new @ v_new > v @ v and nsteps < opt.max_steps:
+                rise = f_new - f_x > _F_ROUNDING * max(1.0, abs(f_x))
+                if rise and v_new @ v_new > v @ v and nsteps < opt.max_steps:
                     # Uphill with more kinetic energy: integrator instability.
                     dt *= 0.5
+                    if dt < _DT_FLOOR * opt.dt:
+                        return LfopResult(x, anorm, nsteps, False, 'time step collapsed')
                     x_new = x + v * dt
                     continue
             # Step 9: count gradient reversals.
