@@ -1,0 +1,74 @@
+"""The optimisation loop counts model runs as the paper does (section 2)."""
+
+import numpy as np
+import pytest
+
+from suspension_tuning.tuning import FullEvaluation, TuningRequest, centre, optimise
+
+TARGET = np.array([0.3, 0.7])
+
+
+def quadratic_model(points):
+    # f = |x - target|^2, one constraint g = x1 + x2 - 0.8 <= 0 (active at the optimum).
+    points = np.atleast_2d(points)
+    f = np.sum((points - TARGET) ** 2, axis=1)
+    g = (points[:, 0] + points[:, 1] - 0.8)[:, None]
+    return FullEvaluation(f=f, g=g, inputs={'x': points[0].copy()})
+
+
+def analytic_gradient(x, inputs):
+    # The inputs passed through are those of the full-model run at the same x.
+    np.testing.assert_array_equal(inputs['x'], x)
+    return 2.0 * (x - TARGET), np.array([[1.0, 1.0]])
+
+
+OPTIONS = {'xtol': 1e-7, 'ftol': 1e-12, 'maxiter': 60}
+# Optimum of min |x-(0.3,0.7)|^2 s.t. x1+x2 <= 0.8: projection onto the line,
+# x* = (0.3,0.7) - 0.1*(1,1) = (0.2, 0.6), f* = 0.02 (hand calculation).
+X_STAR = np.array([0.2, 0.6])
+
+
+@pytest.mark.parametrize('source', ['full', 'simplified'])
+def test_loop_reaches_the_constrained_optimum_and_counts_runs(source):
+    request = TuningRequest('ride', 2, gradient_source=source, options=OPTIONS)
+    result = optimise(request, quadratic_model, analytic_gradient)
+    np.testing.assert_allclose(result.x, X_STAR, rtol=1e-4)
+    assert result.f == pytest.approx(0.02, rel=1e-4)
+    n = 2
+    ngev = result.ngev_by_source[source]
+    if source == 'full':
+        # One full run per evaluation plus 2n per central-difference gradient.
+        assert result.n_full_runs == result.nfev + 2 * n * ngev
+        assert result.n_simplified_runs == 0
+    else:
+        # Paper section 2: one full run per iteration, 2n simplified runs per gradient.
+        assert result.n_full_runs == result.nfev
+        assert result.n_simplified_runs == 2 * n * ngev
+
+
+def test_callback_can_cancel_between_iterations():
+    request = TuningRequest('ride', 2, gradient_source='full', options=OPTIONS)
+    seen = []
+    result = optimise(request, quadratic_model, callback=lambda rec, cnt: seen.append(rec) or
+                      len(seen) >= 2)
+    assert len(seen) == 2
+    assert result.status == 99  # stopped by the caller
+
+
+def test_start_defaults_to_the_centre_of_the_design_space():
+    # Eqs. 6 and 8: bounds 0.001..1, centre 0.5005.
+    assert TuningRequest('handling', 4).start == pytest.approx(centre(4))
+    assert centre(4)[0] == pytest.approx(0.5005)
+
+
+@pytest.mark.parametrize('kwargs, message', [
+    ({'scenario': 'offroad', 'n_vars': 2}, 'unknown scenario'),
+    ({'scenario': 'ride', 'n_vars': 3}, 'n_vars'),
+    ({'scenario': 'ride', 'n_vars': 2, 'gradient_source': 'adjoint'}, 'gradient source'),
+    ({'scenario': 'ride', 'n_vars': 2, 'x0': [0.5, float('nan')]}, 'NaN|nan|finite'),
+    ({'scenario': 'ride', 'n_vars': 2, 'x0': [0.5, 1.5]}, 'bound|outside|range'),
+    ({'scenario': 'ride', 'n_vars': 2, 'x0': [0.5]}, 'length|expected|shape'),
+])
+def test_bad_requests_are_rejected_with_clear_messages(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        TuningRequest(**kwargs)
