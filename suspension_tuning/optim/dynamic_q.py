@@ -835,9 +835,10 @@ def dynamic_q(
     options : DynamicQOptions or mapping, optional
         Algorithm options (see :class:`DynamicQOptions`).
     callback : callable, optional
-        Called after every iteration with an ``OptimizeResult`` of that
-        iteration's record plus the counters; returning True or raising
-        StopIteration ends the run (status 99).
+        Called after every iteration (not for the starting point, as in
+        SciPy) with an ``OptimizeResult`` of that iteration's record plus the
+        counters; returning True or raising StopIteration ends the run
+        (status 99).
     history : sequence of mappings, optional
         ``result.history`` of an earlier run to resume from.
     gradient_source : str, optional
@@ -859,7 +860,7 @@ def dynamic_q(
             record = driver.tell(evaluate(x))
         else:
             record = driver.tell(gradient(x))
-        if record is not None and callback is not None:
+        if record is not None and callback is not None and record['iteration'] > 0:
             intermediate = OptimizeResult(record)
             intermediate.update(fun=record['f'], nit=record['iteration'])
             try:
@@ -946,7 +947,8 @@ def minimize(
         parameter name, as in SciPy); returning True or raising
         StopIteration stops the run.
     options : mapping, optional
-        :class:`DynamicQOptions` fields plus ``fd_step``.  ``rho0`` defaults to
+        :class:`DynamicQOptions` fields plus ``fd_step`` and ``history`` (an
+        earlier ``result.history`` to resume from).  ``rho0`` defaults to
         0.3 times the largest finite bound width, or 0.3 max(1, ||x0||_inf)
         when some variable is unbounded.
 
@@ -954,8 +956,9 @@ def minimize(
     -------
     scipy.optimize.OptimizeResult
         As :func:`dynamic_q`; ``g`` is in the paper convention (g <= 0
-        feasible, i.e. minus SciPy's 'ineq' values) and ``nfev_fd`` counts
-        the function calls spent on finite differences.
+        feasible, i.e. minus SciPy's 'ineq' values); ``nfev_fd`` and
+        ``ncev_fd`` count the objective and constraint-function calls spent
+        on finite differences (not included in ``nfev``).
     """
     if method is not None and method.lower().replace('_', '-') not in ('dynamic-q', 'dynamicq'):
         raise ValueError(f"method must be None or 'dynamic-q', got {method!r}")
@@ -968,6 +971,7 @@ def minimize(
     lower, upper = _parse_bounds(bounds, n)
     opts = dict(options or {})
     fd_step = opts.pop('fd_step', None)
+    history = opts.pop('history', None)
     if tol is not None:
         opts.setdefault('xtol', tol)
         opts.setdefault('ftol', tol)
@@ -988,7 +992,7 @@ def minimize(
         if con['type'] not in ('ineq', 'eq'):
             raise ValueError(f"constraint {k} type must be 'ineq' or 'eq', got {con['type']!r}")
 
-    counts = {'fd': 0}
+    counts = {'fun': 0, 'constraints': 0}
     jac_true = jac is True
     fun_cache: dict[bytes, Any] = {}
 
@@ -1012,9 +1016,9 @@ def minimize(
     def evaluate(x: Array) -> tuple[float, Array, Array]:
         return call_fun(x), -con_values(x, 'ineq'), con_values(x, 'eq')
 
-    def fd(fun1: Callable[[Array], Any], x: Array) -> Array:
+    def fd(fun1: Callable[[Array], Any], x: Array, counter: str) -> Array:
         def batch(points: Array) -> Array:
-            counts['fd'] += points.shape[0]
+            counts[counter] += points.shape[0]
             return np.array([np.asarray(fun1(p), dtype=float) for p in points])
 
         return central_difference(batch, x, _fd_step(x, fd_step), lower, upper)
@@ -1030,7 +1034,7 @@ def minimize(
             if c.get('jac') is not None:
                 j = np.asarray(c['jac'](x, *cargs), dtype=float)
             else:
-                j = fd(lambda p, c=c, cargs=cargs: c['fun'](p, *cargs), x)
+                j = fd(lambda p, c=c, cargs=cargs: c['fun'](p, *cargs), x, 'constraints')
             rows.append(np.atleast_2d(j).reshape(-1, n))
         return np.vstack(rows) if rows else np.zeros((0, n))
 
@@ -1040,7 +1044,7 @@ def minimize(
         elif callable(jac):
             df = np.asarray(jac(x, *args), dtype=float)
         else:
-            df = fd(call_fun, x)
+            df = fd(call_fun, x, 'fun')
         return df, -con_jac(x, 'ineq'), con_jac(x, 'eq')
 
     all_analytic = analytic_f and all(c.get('jac') is not None for c in cons)
@@ -1067,7 +1071,9 @@ def minimize(
         upper,
         opts,
         callback=wrapped_callback,
+        history=history,
         gradient_source=source,
     )
-    res['nfev_fd'] = counts['fd']
+    res['nfev_fd'] = counts['fun']
+    res['ncev_fd'] = counts['constraints']
     return res
