@@ -26,7 +26,13 @@ from scipy.optimize import OptimizeResult
 
 from suspension_tuning.optim.dynamic_q import DynamicQ, DynamicQOptions
 from suspension_tuning.optim.finite_diff import central_difference
-from suspension_tuning.vehicle.design import VARIABLE_NAMES, X_LOWER, X_UPPER, validate_design
+from suspension_tuning.vehicle.design import (
+    VARIABLE_NAMES,
+    X_LOWER,
+    X_UPPER,
+    to_physical,
+    validate_design,
+)
 
 Array = NDArray[np.float64]
 
@@ -120,6 +126,26 @@ class TuningRequest:
         x0 = centre(self.n_vars) if self.x0 is None or len(self.x0) == 0 else self.x0
         object.__setattr__(self, 'start', validate_design(x0, self.n_vars)[0])
         DynamicQOptions.from_mapping(self.options)
+
+
+def physical_settings(x: ArrayLike) -> dict[str, float]:
+    """Physical 4S4 settings of one normalised design, units at the edge (litres).
+
+    Parameters
+    ----------
+    x : array_like, shape (2,) or (4,)
+        Normalised design (eqs. 4-8).
+
+    Returns
+    -------
+    dict
+        ``dpsf_front``, ``gas_volume_front_l``, ``dpsf_rear``, ``gas_volume_rear_l``.
+    """
+    axles = to_physical(np.asarray(x, dtype=float))
+    return {'dpsf_front': float(axles.dpsf_front[0]),
+            'gas_volume_front_l': float(axles.gas_volume_front_m3[0]) * 1e3,
+            'dpsf_rear': float(axles.dpsf_rear[0]),
+            'gas_volume_rear_l': float(axles.gas_volume_rear_m3[0]) * 1e3}
 
 
 def centre(n_vars: int) -> Array:

@@ -72,3 +72,16 @@ def test_start_defaults_to_the_centre_of_the_design_space():
 def test_bad_requests_are_rejected_with_clear_messages(kwargs, message):
     with pytest.raises(ValueError, match=message):
         TuningRequest(**kwargs)
+
+
+def test_physical_settings_use_litres_at_the_edge():
+    from suspension_tuning.tuning import physical_settings
+
+    # Eq. 5: x = (1, 1) -> dpsf 3, gvol 0.6 L on both axles; x = 0.001 -> 0.1 + 0.001*2.9.
+    top = physical_settings([1.0, 1.0])
+    assert top == pytest.approx({'dpsf_front': 3.0, 'gas_volume_front_l': 0.6,
+                                 'dpsf_rear': 3.0, 'gas_volume_rear_l': 0.6})
+    low = physical_settings([0.001, 0.001, 1.0, 0.5])
+    assert low['dpsf_front'] == pytest.approx(0.1029)
+    assert low['gas_volume_front_l'] == pytest.approx(0.1005)
+    assert low['gas_volume_rear_l'] == pytest.approx(0.35)

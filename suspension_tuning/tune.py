@@ -1,0 +1,116 @@
+"""``tune``: send an optimisation goal to the coordinator and show its progress.
+
+Usage::
+
+    ros2 run suspension_tuning tune --scenario ride --n-vars 4 --gradient simplified
+
+Prints one line per Dynamic-Q iteration (iteration, f, largest violation, model runs
+so far) from the action's feedback, then the result with the optimum in physical
+units (damper scale factor, gas volume in litres).  Ctrl-C cancels the goal.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+
+import rclpy
+from rclpy.action import ActionClient
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from suspension_tuning_interfaces.action import Optimise
+
+
+def parse_args(argv: list[str]) -> argparse.Namespace:
+    """Parse the command-line options of ``tune``."""
+    parser = argparse.ArgumentParser(prog='tune', description=__doc__.split('\n')[0])
+    parser.add_argument('--scenario', default='ride', help="'ride' or 'handling'")
+    parser.add_argument('--n-vars', type=int, default=2, help='2 or 4 design variables')
+    parser.add_argument('--x0', type=float, nargs='*', default=[],
+                        help='normalised start point (default: centre of the design space)')
+    parser.add_argument('--gradient', default='simplified', help="'simplified' or 'full'")
+    parser.add_argument('--max-iterations', type=int, default=0, help='0 = coordinator default')
+    parser.add_argument('--move-limit', type=float, default=0.0, help='0 = coordinator default')
+    parser.add_argument('--action', default='/coordinator/optimise', help='action name')
+    parser.add_argument('--server-timeout', type=float, default=30.0,
+                        help='seconds to wait for the coordinator')
+    return parser.parse_args(argv)
+
+
+def format_feedback(latest) -> str:
+    """Format one progress line of an IterationRecord."""
+    x = ', '.join(f'{v:.4f}' for v in latest.x)
+    return (f'iteration {latest.iteration:3d}  f = {latest.f:9.5f}  '
+            f'max violation = {latest.max_violation:8.4f}  move limit = {latest.move_limit:.4f}  '
+            f'full runs = {latest.n_full_runs:4d}  simplified runs = '
+            f'{latest.n_simplified_runs:4d}  x = [{x}]')
+
+
+def format_result(result) -> str:
+    """Format the action result as a report, physical units at the edge."""
+    lines = [f'success: {result.success}', f'message: {result.message}',
+             f'f: {result.f:.6f}', 'x: [' + ', '.join(f'{v:.4f}' for v in result.x) + ']',
+             'g: [' + ', '.join(f'{v:.4f}' for v in result.g) + ']',
+             f'iterations: {result.iterations}', f'full-model runs: {result.n_full_runs}',
+             f'simplified-model runs: {result.n_simplified_runs}',
+             f'calibration full-model runs: {result.n_calibration_runs}',
+             f'wall time: {result.wall_time_s:.1f} s', 'optimum in physical units:']
+    lines += [f'  {name}: {value:.4g}'
+              for name, value in zip(result.physical_names, result.physical_values)]
+    return '\n'.join(lines)
+
+
+def wait(future, timeout_s: float | None = None):
+    """Wait for an rclpy future spun by another thread; return its result."""
+    done = threading.Event()
+    future.add_done_callback(lambda _: done.set())
+    if not done.wait(timeout_s):
+        raise TimeoutError('no answer from the coordinator')
+    return future.result()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``ros2 run suspension_tuning tune``."""
+    args_list = sys.argv[1:] if argv is None else argv
+    ros_args = rclpy.utilities.remove_ros_args(['tune', *args_list])[1:]
+    args = parse_args(ros_args)
+    rclpy.init(args=['tune', *args_list])
+    node = Node('tune')
+    client = ActionClient(node, Optimise, args.action)
+    executor = MultiThreadedExecutor()
+    executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    status = 1
+    try:
+        if not client.wait_for_server(timeout_sec=args.server_timeout):
+            print(f'error: no action server {args.action} within {args.server_timeout} s',
+                  file=sys.stderr)
+            return 2
+        goal = Optimise.Goal(scenario=args.scenario, n_vars=args.n_vars, x0=args.x0,
+                             gradient_source=args.gradient,
+                             max_iterations=args.max_iterations, move_limit=args.move_limit)
+        handle = wait(client.send_goal_async(
+            goal, feedback_callback=lambda fb: print(format_feedback(fb.feedback.latest),
+                                                     flush=True)), args.server_timeout)
+        if handle is None or not handle.accepted:
+            print('error: goal rejected', file=sys.stderr)
+            return 2
+        try:
+            result = wait(handle.get_result_async()).result
+        except KeyboardInterrupt:
+            print('cancelling ...', file=sys.stderr)
+            wait(handle.cancel_goal_async(), 10.0)
+            return 130
+        print(format_result(result), flush=True)
+        status = 0 if result.success else 1
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return status
+
+
+if __name__ == '__main__':
+    sys.exit(main())
