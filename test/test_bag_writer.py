@@ -1,0 +1,312 @@
+"""Bag layer: definitions, writer, tolerant reader, reindex; checked with two readers."""
+
+import random
+import shutil
+import struct
+
+import pytest
+import yaml
+
+TYPES = [
+    'suspension_tuning_interfaces/msg/IterationRecord',
+    'suspension_tuning_interfaces/msg/ValveState',
+    'suspension_tuning_interfaces/msg/VehicleState',
+    'suspension_tuning_interfaces/srv/EvaluateDesign_Event',
+    'suspension_tuning_interfaces/srv/EvaluateGradient_Event',
+    'suspension_tuning_interfaces/srv/Calibrate_Event',
+    'suspension_tuning_interfaces/action/Optimise_FeedbackMessage',
+    'suspension_tuning_interfaces/action/Optimise_Result',
+    'action_msgs/msg/GoalStatusArray',
+    'sensor_msgs/msg/Imu',
+    'sensor_msgs/msg/JointState',
+    'rosgraph_msgs/msg/Clock',
+    'std_msgs/msg/String',
+]
+
+
+def sample_messages():
+    """One filled message per type of TYPES (values chosen to be recognisable)."""
+    from action_msgs.msg import GoalStatus, GoalStatusArray
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import Imu, JointState
+    from std_msgs.msg import String
+    from suspension_tuning_interfaces.action import Optimise
+    from suspension_tuning_interfaces.msg import IterationRecord, ValveState, VehicleState
+    from suspension_tuning_interfaces.srv import Calibrate, EvaluateDesign, EvaluateGradient
+
+    record = IterationRecord(iteration=3, x=[0.25, 0.5], f=1.25, g=[-0.5], move_limit=0.125)
+    event = EvaluateDesign.Event()
+    event.request = [EvaluateDesign.Request(scenario='ride', n_vars=2, designs=[0.25, 0.5])]
+    grad = EvaluateGradient.Event()
+    grad.response = [EvaluateGradient.Response(success=True, df=[1.0, -2.0])]
+    calib = Calibrate.Event()
+    calib.request = [Calibrate.Request(scenario='handling', n_vars=4, n_samples=30)]
+    feedback = Optimise.Impl.FeedbackMessage()
+    feedback.feedback.latest = record
+    result = Optimise.Result(success=True, x=[0.25, 0.5], f=1.25, g=[-0.5], history=[record])
+    joint = JointState(name=['FL', 'FR'], position=[0.01, -0.02], effort=[4000.0, 4100.0])
+    imu = Imu()
+    imu.linear_acceleration.z = 9.81
+    return {
+        TYPES[0]: record,
+        TYPES[1]: ValveState(step=7, front_spring=1),
+        TYPES[2]: VehicleState(step=7, speed_mps=18.0, strut_pressure_pa=[4e6] * 4),
+        TYPES[3]: event,
+        TYPES[4]: grad,
+        TYPES[5]: calib,
+        TYPES[6]: feedback,
+        TYPES[7]: result,
+        TYPES[8]: GoalStatusArray(status_list=[GoalStatus(status=GoalStatus.STATUS_SUCCEEDED)]),
+        TYPES[9]: imu,
+        TYPES[10]: joint,
+        TYPES[11]: Clock(),
+        TYPES[12]: String(data='scenario: ride'),
+    }
+
+
+def topic_of(type_name):
+    return '/' + type_name.replace('/', '_').lower()
+
+
+def write_sample_bag(path, repeat=1, chunk_size=512 * 1024):
+    """Every sample type on its own topic, `repeat` times, 10 ms apart (log time)."""
+    from rclpy.serialization import serialize_message
+
+    from suspension_tuning.bag.writer import BagWriter, qos_profile_dict
+
+    expected = []
+    with BagWriter(path, chunk_size=chunk_size) as bag:
+        for type_name in TYPES:
+            bag.add_topic(
+                topic_of(type_name),
+                type_name,
+                [qos_profile_dict('reliable', 'transient_local', depth=1)],
+            )
+        bag.add_metadata('run_config', {'yaml': 'scenario: ride\n'})
+        t = 1_700_000_000_000_000_000
+        for k in range(repeat):
+            for type_name, msg in sample_messages().items():
+                data = serialize_message(msg)
+                t += 10_000_000
+                bag.write(topic_of(type_name), data, t, t - 1000, sequence=k)
+                expected.append((topic_of(type_name), t, data))
+    return expected
+
+
+@pytest.mark.parametrize('type_name', TYPES)
+def test_definition_has_the_top_text_first_and_each_dependency_once(type_name):
+    from suspension_tuning.bag.definitions import SEPARATOR, definition_text
+
+    text = definition_text(type_name)
+    headers = [line for line in text.splitlines() if line.startswith('MSG: ')]
+    assert not text.startswith(SEPARATOR)
+    assert len(headers) == len(set(headers))
+    # every dependency block is preceded by exactly the 80-'=' separator line
+    lines = text.splitlines()
+    for k, line in enumerate(lines):
+        if line.startswith('MSG: '):
+            assert lines[k - 1] == '=' * 80
+            assert line.count('/') == 2  # pkg/msg/Name
+
+
+def test_service_event_definition_is_info_request_response():
+    from suspension_tuning.bag.definitions import definition_text
+
+    text = definition_text('suspension_tuning_interfaces/srv/EvaluateDesign_Event')
+    top = text.split('=' * 80)[0].split('\n')
+    # composition of a service event (rosidl, service_msgs): info, request[<=1], response[<=1]
+    assert top[:3] == [
+        'service_msgs/ServiceEventInfo info',
+        'suspension_tuning_interfaces/EvaluateDesign_Request[<=1] request',
+        'suspension_tuning_interfaces/EvaluateDesign_Response[<=1] response',
+    ]
+    assert 'MSG: service_msgs/msg/ServiceEventInfo' in text
+    assert 'MSG: builtin_interfaces/msg/Time' in text
+
+
+def test_unknown_type_raises_definition_not_found():
+    from suspension_tuning.bag.definitions import DefinitionNotFoundError, definition_text
+
+    with pytest.raises(DefinitionNotFoundError):
+        definition_text('no_such_pkg/msg/Nothing')
+    with pytest.raises(ValueError):
+        definition_text('not a type')
+
+
+def test_bag_has_ros2_profile_cdr_channels_qos_statistics_and_rosbag2_record(tmp_path):
+    from mcap.reader import make_reader
+
+    write_sample_bag(tmp_path / 'bag', repeat=2)
+    files = sorted(p.name for p in (tmp_path / 'bag').iterdir())
+    assert files == ['bag_0.mcap', 'metadata.yaml']
+    with open(tmp_path / 'bag' / 'bag_0.mcap', 'rb') as stream:
+        reader = make_reader(stream)
+        assert reader.get_header().profile == 'ros2'
+        summary = reader.get_summary()
+        assert summary.statistics.message_count == 2 * len(TYPES)
+        assert summary.statistics.chunk_count >= 1
+        assert all(c.compression == 'zstd' for c in summary.chunk_indexes)
+        assert {s.encoding for s in summary.schemas.values()} == {'ros2msg'}
+        for channel in summary.channels.values():
+            assert channel.message_encoding == 'cdr'
+            qos = yaml.safe_load(channel.metadata['offered_qos_profiles'])
+            assert qos[0]['reliability'] == 'reliable'
+            assert qos[0]['durability'] == 'transient_local'
+            assert channel.metadata['topic_type_hash'].startswith('RIHS01_')
+        records = {m.name: m.metadata for m in reader.iter_metadata()}
+    assert records['run_config'] == {'yaml': 'scenario: ride\n'}
+    serialized = yaml.safe_load(records['rosbag2']['serialized_metadata'])
+    assert serialized['message_count'] == 2 * len(TYPES)
+    info = yaml.safe_load((tmp_path / 'bag' / 'metadata.yaml').read_text())
+    info = info['rosbag2_bagfile_information']
+    assert info['version'] == 9
+    assert info['storage_identifier'] == 'mcap'
+    assert info['relative_file_paths'] == ['bag_0.mcap']
+    assert info['message_count'] == 2 * len(TYPES)
+    # 26 messages 10 ms apart: 25 intervals = 250 ms
+    assert info['duration']['nanoseconds'] == 250_000_000
+    counts = {
+        t['topic_metadata']['name']: t['message_count'] for t in info['topics_with_message_count']
+    }
+    assert counts == {topic_of(t): 2 for t in TYPES}
+
+
+def test_every_message_decodes_with_mcap_ros2_and_equals_what_was_written(tmp_path):
+    from suspension_tuning.bag.reader import decode, read_messages
+
+    expected = write_sample_bag(tmp_path / 'bag')
+    contents = read_messages(tmp_path / 'bag')
+    assert contents.complete and contents.stop_reason == ''
+    assert [(m.topic, m.log_time_ns, m.data) for m in contents.messages] == expected
+    assert all(m.publish_time_ns == m.log_time_ns - 1000 for m in contents.messages)
+    decoded = {m.topic: decode(contents, m) for m in contents.messages}
+    assert decoded[topic_of(TYPES[0])].x == [0.25, 0.5]
+    event = decoded[topic_of(TYPES[3])]
+    assert event.request[0].scenario == 'ride'
+    assert list(event.request[0].designs) == [0.25, 0.5]
+    assert list(decoded[topic_of(TYPES[4])].response[0].df) == [1.0, -2.0]
+    assert decoded[topic_of(TYPES[6])].feedback.latest.move_limit == 0.125
+    assert decoded[topic_of(TYPES[7])].history[0].iteration == 3
+    assert decoded[topic_of(TYPES[8])].status_list[0].status == 4  # STATUS_SUCCEEDED
+    assert decoded[topic_of(TYPES[10])].name == ['FL', 'FR']
+    assert decoded[topic_of(TYPES[12])].data == 'scenario: ride'
+
+
+def rosbags_decode(typestore, raw, type_name):
+    """Decode with rosbags' CDR deserialiser; return (message, trailing bytes).
+
+    rosbags' own ``deserialize_cdr`` also rejects messages with more than 3 bytes after
+    the CDR payload; Fast DDS (rmw_fastrtps, Jazzy) serialises some types with a few
+    unused bytes at the end (e.g. 8 after Optimise_Result), so the payload end is
+    returned and checked by the caller instead.
+    """
+    msgdef = typestore.get_msgdef(type_name)
+    assert bytes(raw[:2]) == b'\x00\x01'  # CDR little endian encapsulation
+    message, pos = msgdef.deserialize_cdr_le(raw[4:], 0, msgdef.cls, typestore)
+    return message, len(raw) - 4 - pos
+
+
+def test_bag_opens_with_rosbags_and_every_message_decodes(tmp_path):
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    write_sample_bag(tmp_path / 'bag', repeat=2)
+    typestore = get_typestore(Stores.EMPTY)
+    names = {}
+    with Reader(tmp_path / 'bag') as reader:
+        assert reader.message_count == 2 * len(TYPES)
+        for connection in reader.connections:
+            assert connection.msgdef.format.name == 'MSG'  # ros2msg
+            assert connection.ext.offered_qos_profiles[0].depth == 1
+            types = get_types_from_msg(connection.msgdef.data, connection.msgtype)
+            typestore.register(types)
+            # rosbags names srv/action types pkg/srv/msg/T; the first entry is the top type
+            names[connection.topic] = next(iter(types))
+        decoded = {}
+        for connection, _, raw in reader.messages():
+            message, trailing = rosbags_decode(typestore, raw, names[connection.topic])
+            assert 0 <= trailing <= 8, (connection.topic, trailing)
+            decoded[connection.topic] = message
+    assert list(decoded[topic_of(TYPES[0])].x) == [0.25, 0.5]
+    assert decoded[topic_of(TYPES[3])].request[0].scenario == 'ride'
+    assert decoded[topic_of(TYPES[7])].history[0].iteration == 3
+    assert decoded[topic_of(TYPES[12])].data == 'scenario: ride'
+
+
+def chunk_ends(mcap_bytes):
+    """Byte offsets just after each Chunk record of an MCAP file (opcode 0x06)."""
+    ends, pos = [], 8
+    while pos + 9 <= len(mcap_bytes):
+        opcode, length = struct.unpack_from('<BQ', mcap_bytes, pos)
+        pos += 9 + length
+        if opcode == 0x06:
+            ends.append(pos)
+        if opcode == 0x02:  # footer
+            break
+    return ends
+
+
+def test_bag_cut_at_random_bytes_reads_to_its_last_complete_chunk(tmp_path):
+    from suspension_tuning.bag.reader import read_messages
+
+    # small chunks (2 KiB) so that the file has many: each of the 13 types is 50-400 B
+    expected = write_sample_bag(tmp_path / 'bag', repeat=20, chunk_size=2048)
+    data = (tmp_path / 'bag' / 'bag_0.mcap').read_bytes()
+    full = read_messages(tmp_path / 'bag')
+    assert full.complete and full.message_count == len(expected) == 260
+    ends = chunk_ends(data)
+    assert len(ends) == full.chunks >= 10
+    rng = random.Random(8)  # seeded: the same cuts every run
+    cuts = sorted(rng.randrange(9, len(data)) for _ in range(12))
+    for cut in cuts:
+        partial = tmp_path / f'cut_{cut}.mcap'
+        partial.write_bytes(data[:cut])
+        contents = read_messages(partial)
+        complete_chunks = sum(1 for e in ends if e <= cut)
+        assert not contents.complete
+        assert contents.chunks == complete_chunks, cut
+        # messages are exactly those of the complete chunks: a prefix of what was written
+        n = contents.message_count
+        assert [(m.topic, m.log_time_ns, m.data) for m in contents.messages] == expected[:n]
+        if complete_chunks == len(ends):
+            assert n == len(expected)
+        else:
+            assert n < len(expected)
+
+
+def test_reindex_repairs_a_truncated_bag_into_a_complete_one(tmp_path):
+    from rosbags.rosbag2 import Reader
+
+    from suspension_tuning.bag.reader import read_messages, reindex
+
+    expected = write_sample_bag(tmp_path / 'bag', repeat=10, chunk_size=2048)
+    data = (tmp_path / 'bag' / 'bag_0.mcap').read_bytes()
+    (tmp_path / 'bag' / 'metadata.yaml').unlink()  # as a killed recorder leaves it
+    ends = chunk_ends(data)
+    (tmp_path / 'bag' / 'bag_0.mcap').write_bytes(data[: ends[3] + 100])
+    recovered = read_messages(tmp_path / 'bag').message_count
+    assert 0 < recovered < len(expected)
+    reindex(tmp_path / 'bag')
+    repaired = read_messages(tmp_path / 'bag')
+    assert repaired.complete and repaired.message_count == recovered
+    assert repaired.metadata['run_config'] == {'yaml': 'scenario: ride\n'}
+    with Reader(tmp_path / 'bag') as reader:
+        assert reader.message_count == recovered
+    shutil.rmtree(tmp_path / 'bag')
+
+
+def test_writer_rejects_bad_input(tmp_path):
+    from suspension_tuning.bag.writer import BagWriter, qos_profile_dict
+
+    with BagWriter(tmp_path / 'bag') as bag:
+        bag.add_topic('/a', 'std_msgs/msg/String')
+        with pytest.raises(ValueError, match='not registered'):
+            bag.write('/b', b'\x00\x01\x00\x00', 1)
+        with pytest.raises(ValueError, match='already has type'):
+            bag.add_topic('/a', 'std_msgs/msg/Float64')
+        with pytest.raises(ValueError, match='negative'):
+            bag.write('/a', b'\x00\x01\x00\x00', -1)
+    with pytest.raises(ValueError, match='not empty'):
+        BagWriter(tmp_path / 'bag')
+    with pytest.raises(ValueError, match='reliability'):
+        qos_profile_dict(reliability='sometimes')
