@@ -39,6 +39,24 @@ def test_lfop_solves_rosenbrock_from_standard_start():
     np.testing.assert_allclose(result.x, [1.0, 1.0], atol=1e-4)
 
 
+def test_lfop_converges_on_stiff_penalty_wall():
+    # P = (x1-2)^2 + (x2-1)^2 + mu max(0, x1 + x2 - 2)^2 with mu = 1e4 (LFOPC phase 1).
+    # By hand: x = (2 - t, 1 - t), dP/dt = 4t - 4 mu (1 - 2t) = 0 gives
+    # t = mu / (1 + 2 mu) = 0.4999750, x* = (1.5000250, 0.5000250).  Without the stability
+    # safeguard this run cycled between the wall and the interior and hit its step cap.
+    mu = 1e4
+
+    def grad(x):
+        g = max(x[0] + x[1] - 2.0, 0.0)
+        return _quadratic_gradient(x) + 2.0 * mu * g * np.array([1.0, 1.0])
+
+    result = lfop(grad, [1.5025, 0.5025], {'max_steps': 3000})
+    assert result.converged
+    t = mu / (1.0 + 2.0 * mu)
+    # Gradient test 1e-5 over the smallest curvature 2 bounds the error by 5e-6.
+    np.testing.assert_allclose(result.x, [2.0 - t, 1.0 - t], atol=5e-6)
+
+
 def test_lfopc_active_linear_inequality_reaches_kkt_point():
     # min (x1-2)^2 + (x2-1)^2 s.t. x1 + x2 - 2 <= 0.  KKT by hand: x1 - 2 = x2 - 1
     # and x1 + x2 = 2 give x* = (1.5, 0.5), multiplier 1, f* = 0.5.
