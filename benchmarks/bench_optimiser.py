@@ -133,7 +133,7 @@ def main():
         'No gradients given (Dynamic-Q: central differences; SLSQP: its default)', False, summary
     )
     summary['problems'] = len(PROBLEMS)
-    for key, value in summary.items():
+    for key, value in sorted(summary.items()):
         print(f'{key}: {value:.6g}' if isinstance(value, float) else f'{key}: {value}')
 
 

@@ -689,6 +689,8 @@ class DynamicQ:
         self._points = points
         self.nfev = int(last.get('nfev', len(records)))
         self.ngev_by_source = dict(last.get('ngev_by_source', {}))
+        if 'rho_next' not in last:
+            raise ValueError('history: the last record lacks field rho_next (move limit)')
         self._rho = float(last['rho_next'])
         for p in points:
             self._update_best(p)
