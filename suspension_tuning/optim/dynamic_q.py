@@ -56,8 +56,8 @@ published rules as recalled [R]; the analytic tests decide):
   curvatures along the rejected step (same interpolation formula, with the
   trial point in place of x^{i-1}), so the re-solved subproblem is not the
   old one in a smaller ball only.
-* The iterate is clipped into the bounds after each subproblem (rounding
-  guard; LFOPC's phase 2 leaves active bounds violated by < 1e-9 of rho),
+* The iterate is clipped into the bounds after each subproblem (LFOPC's
+  phase 2 ends on the active bounds only to within its gradient tolerance),
   and is checked to lie inside the bounds before every evaluation.
 
 Interfaces: :class:`DynamicQ` is an ask/tell driver (the ROS coordinator
