@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 # ---- state indices --------------------------------------------------------------------
 I_X, I_Y, I_PSI, I_U, I_V, I_R = 0, 1, 2, 3, 4, 5
@@ -35,6 +35,8 @@ I_VEL0 = 14  # rates of the 8 positions above start here
 I_DELTA = 22
 N_STATE = 23
 N_ACC = 11
+COUPLED = np.array([0, 1, 5, 6, 8, 10])  # v, r, phi_f, phi_r, phiaf, phiar
+UNCOUPLED = np.array([2, 3, 4, 7, 9])  # u, zs, theta, zaf, zar
 
 # ---- strut state ----------------------------------------------------------------------
 SS_KSUM, SS_VREF, SS_VGUARD, SS_DPSF = 0, 1, 2, 3
@@ -121,8 +123,32 @@ H_ZS, H_THETA = 34, 35
 N_HIST = 36
 N_WORK = 50
 
+# ---- internal controllers (driver and speed controller run inside the kernel) ---------
+# Same algorithms as manoeuvre.PreviewDriver.steer and manoeuvre.SpeedController (checked
+# against them in test_full_model.py); the reference path y_ref(x) is tabulated.
+(
+    C_STEER_ON,
+    C_SPEED_ON,
+    C_TP,
+    C_LPMIN,
+    C_KFF,
+    C_KUS,
+    C_KR,
+    C_DMAX,
+    C_WB,
+    C_VT,
+    C_KP,
+    C_KI,
+    C_FLIM,
+    C_TAB_X0,
+    C_TAB_DX,
+    C_TC,
+    C_SPC,
+) = range(17)
+N_CTRL = 17
 
-@njit(cache=True, inline='always')
+
+@njit(cache=True, inline='always', fastmath=True)
 def _hermite(v, knots, vals, slopes):
     n = knots.shape[0]
     if v <= knots[0]:
@@ -144,7 +170,7 @@ def _hermite(v, knots, vals, slopes):
     )
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline='always', fastmath=True)
 def _pen(d, s):
     if d <= 0.0:
         return 0.0
@@ -153,17 +179,20 @@ def _pen(d, s):
     return d - 0.5 * s
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline='always', fastmath=True)
 def _pacejka(alpha, fz, pc):
     """ISO-sign Pacejka 89 lateral force [N]; alpha rad, fz N (camber 0)."""
     if fz <= 0.0:
         return 0.0
+    if alpha == 0.0 and pc[9] == 0.0 and pc[10] == 0.0 and pc[12] == 0.0 and pc[13] == 0.0:
+        return 0.0  # no slip and no shifts: exactly zero force (straight running)
     fzk = fz * 1.0e-3
     if fzk < 1.0e-6:
         fzk = 1.0e-6
     c = pc[0]
     d = pc[1] * fzk * fzk + pc[2] * fzk
-    bcd = pc[3] * math.sin(2.0 * math.atan(fzk / pc[4]))
+    q = fzk / pc[4]
+    bcd = pc[3] * 2.0 * q / (1.0 + q * q)  # = a3 sin(2 atan(Fz/a4))
     b = bcd / (c * d)
     e = pc[6] * fzk + pc[7]
     sh = pc[9] * fzk + pc[10]
@@ -177,7 +206,7 @@ def _pacejka(alpha, fz, pc):
     return -(d * math.sin(c * math.atan(bx - e * (bx - math.atan(bx)))) + sv)
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline='always', fastmath=True)
 def _road(xw, x0, dx, zl, zr, side):
     """Elevation and slope of one track at distance xw (clamped at the ends)."""
     n = zl.shape[0]
@@ -203,7 +232,7 @@ def _road(xw, x0, dx, zl, zr, side):
     return z0 + t * (z1 - z0), slope
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True)
 def deriv(
     s, ss, u_in, P, Minv, pc, dk, dv, ds, rx0, rdx, rzl, rzr, ds_out, full, hist, want_out, work
 ):
@@ -376,11 +405,16 @@ def deriv(
     rhs[9] = fz_r_sum - fs_r_sum - P[P_MAR] * g
     rhs[10] = t2 * fz_r_mom - ts2 * fs_r_mom + P[P_HRCR] * sum_fy_b_r + arb_r - P[P_MAR] * lr * ur
 
-    for k in range(N_ACC):
+    # M (and so Minv) is block diagonal: lateral/yaw/roll DOFs coupled, the rest diagonal
+    for k in range(6):
+        kk = COUPLED[k]
         tot = 0.0
-        for j in range(N_ACC):
-            tot += Minv[k, j] * rhs[j]
-        acc[k] = tot
+        for j in range(6):
+            tot += Minv[kk, COUPLED[j]] * rhs[COUPLED[j]]
+        acc[kk] = tot
+    for k in range(5):
+        kk = UNCOUPLED[k]
+        acc[kk] = Minv[kk, kk] * rhs[kk]
 
     ds_out[I_X] = Xd
     ds_out[I_Y] = u * spsi + v * cpsi
@@ -430,7 +464,54 @@ def deriv(
         hist[H_THETA] = s[I_TH]
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True)
+def y_table(x, ytab, x0, dx):
+    """Linear interpolation of the tabulated reference path (clamped at the ends)."""
+    n = ytab.shape[0]
+    f = (x - x0) / dx
+    if f <= 0.0:
+        return ytab[0]
+    if f >= n - 1:
+        return ytab[n - 1]
+    i = int(f)
+    t = f - i
+    return ytab[i] + t * (ytab[i + 1] - ytab[i])
+
+
+@njit(cache=True, fastmath=True)
+def controller(s, uin, cstate, C, ytab):
+    """Preview steering driver and PI speed controller (zero-order hold update)."""
+    u = s[I_U]
+    if C[C_STEER_ON] > 0.0:
+        lp = C[C_TP] * abs(u)
+        if lp < C[C_LPMIN]:
+            lp = C[C_LPMIN]
+        xt = s[I_X] + lp
+        dyw = y_table(xt, ytab, C[C_TAB_X0], C[C_TAB_DX]) - s[I_Y]
+        e = -math.sin(s[I_PSI]) * lp + math.cos(s[I_PSI]) * dyw
+        kappa = 2.0 * e / (lp * lp + dyw * dyw)
+        delta = C[C_KFF] * (C[C_WB] + C[C_KUS] * u * u) * kappa + C[C_KR] * (u * kappa - s[I_R])
+        if delta > C[C_DMAX]:
+            delta = C[C_DMAX]
+        elif delta < -C[C_DMAX]:
+            delta = -C[C_DMAX]
+        uin[IN_DELTA_CMD] = delta
+    if C[C_SPEED_ON] > 0.0:
+        err = C[C_VT] - u
+        raw = C[C_KP] * err + C[C_KI] * cstate[0]
+        lim = C[C_FLIM]
+        force = raw
+        if force > lim:
+            force = lim
+        elif force < -lim:
+            force = -lim
+        uin[IN_FDRIVE] = force
+        wind = (raw > lim and err > 0.0) or (raw < -lim and err < 0.0)
+        if not wind:
+            cstate[0] += err * C[C_TC]
+
+
+@njit(cache=True, parallel=True, fastmath=True)
 def integrate(
     states,
     sstates,
@@ -453,8 +534,14 @@ def integrate(
     hist_out,
     full_off,
     hist_off,
+    cstates,
+    C,
+    ytab,
 ):
     """Advance every design ``n_steps`` fixed RK4 steps of ``dt`` (in place).
+
+    If ``C[C_STEER_ON]`` or ``C[C_SPEED_ON]`` is set, the internal controllers update the
+    held inputs at absolute steps divisible by ``C[C_SPC]`` (before that step).
 
     Outputs are evaluated at the start of each step (first RK stage, no extra cost):
     ``full_out[b, :, full_off + k]`` for every step k, and ``hist_out[b, :, j]`` at
@@ -463,20 +550,25 @@ def integrate(
     """
     n_b = states.shape[0]
     n = states.shape[1]
-    k1 = np.empty(n)
-    k2 = np.empty(n)
-    k3 = np.empty(n)
-    k4 = np.empty(n)
-    tmp = np.empty(n)
-    full = np.empty(N_FULL)
-    hist = np.empty(N_HIST)
-    work = np.empty(N_WORK)
-    for bi in range(n_b):
+    for bi in prange(n_b):
+        k1 = np.empty(n)
+        k2 = np.empty(n)
+        k3 = np.empty(n)
+        k4 = np.empty(n)
+        tmp = np.empty(n)
+        full = np.empty(N_FULL)
+        hist = np.empty(N_HIST)
+        work = np.empty(N_WORK)
         s = states[bi]
         ss = sstates[bi]
         uin = inputs[bi]
         hj = hist_off
+        cs = cstates[bi]
+        spc = int(C[C_SPC])
+        ctrl_on = C[C_STEER_ON] > 0.0 or C[C_SPEED_ON] > 0.0
         for k in range(n_steps):
+            if ctrl_on and (step0 + k) % spc == 0:
+                controller(s, uin, cs, C, ytab)
             want = full_out.shape[2] > 0
             deriv(
                 s, ss, uin, P, Minv, pc, dk, dv, ds, rx0, rdx, rzl, rzr, k1, full, hist, True, work

@@ -47,6 +47,8 @@ from .params import VehicleParams, load_vehicle_params
 CORNERS = ('FL', 'FR', 'RL', 'RR')
 AXLES = ('front', 'rear')
 VERTICAL_DOFS = ('zs', 'theta', 'phi_f', 'phi_r', 'zaf', 'phiaf', 'zar', 'phiar')
+PATH_TABLE_DX_M = 0.05  # [m] tabulation step of the driver's reference path (C1 path:
+# linear-interpolation error ~ dx^2 y''/8, below 1e-5 m for the ISO 3888-1 transitions)
 FULL_CHANNELS = (
     'acc_driver',
     'acc_passenger',
@@ -568,6 +570,8 @@ class FullVehicleModel:
         controller: Controller | None = None,
         record: bool = True,
         solve_equilibrium: bool = True,
+        driver=None,
+        speed_controller=None,
     ) -> None:
         """Put every design at static equilibrium at the given speed.
 
@@ -583,13 +587,19 @@ class FullVehicleModel:
             Initial position of the sprung cg and heading.
         controller : callable, optional
             ``controller(model) -> (steer_cmd_rad (batch,), drive_force_n (batch,))`` called
-            every control period (zero-order hold).  Default: no steering and a drive force
-            equal to the rolling resistance at static load.
+            every control period (zero-order hold), in Python.  Default: no steering and a
+            drive force equal to the rolling resistance at static load.
         record : bool
             Record outputs.
         solve_equilibrium : bool
             Solve the static equilibrium numerically (else use the analytic one: zero
             displacements, which is exact by construction of the static gas volume).
+        driver : manoeuvre.PreviewDriver, optional
+            Preview steering driver run inside the compiled kernel (same algorithm as
+            ``PreviewDriver.steer``; reference path tabulated every PATH_TABLE_DX_M).
+        speed_controller : manoeuvre.SpeedController, optional
+            PI speed controller run inside the compiled kernel (same algorithm as
+            ``SpeedController.force`` / ``integral_rate``, integral updated each period).
         """
         batch = setting.batch_size
         if valves.spring_soft.shape != (batch, 2) or valves.damping_high.shape != (batch, 2):
@@ -607,6 +617,32 @@ class FullVehicleModel:
         w = self.params.mass_total_kg * self.params.g_mps2
         self._inputs[:, K.IN_FDRIVE] = self.params.rolling_resistance_coeff * w
         self.controller = controller
+        if controller is not None and (driver is not None or speed_controller is not None):
+            raise ValueError('give either a Python controller or driver/speed_controller')
+        c = np.zeros(K.N_CTRL)
+        c[K.C_SPC] = self.steps_per_control
+        c[K.C_TC] = self.steps_per_control * self.dt_s
+        self._ytab = np.zeros(2)
+        self._cstates = np.zeros((batch, 1))
+        if driver is not None:
+            c[K.C_STEER_ON] = 1.0
+            c[K.C_TP], c[K.C_LPMIN] = driver.preview_time_s, driver.preview_min_m
+            c[K.C_KFF] = driver.k_feedforward
+            c[K.C_KUS] = driver.understeer_gradient_rad_per_mps2
+            c[K.C_KR], c[K.C_DMAX] = driver.yaw_rate_gain_s, driver.max_steer_rad
+            c[K.C_WB] = driver.wheelbase_m
+            x_lo = driver.track.section_bounds_m[0] - 1.0
+            x_hi = driver.track.x_end_m + 1.0
+            n = int(np.ceil((x_hi - x_lo) / PATH_TABLE_DX_M)) + 1
+            xs = x_lo + PATH_TABLE_DX_M * np.arange(n)
+            self._ytab = np.ascontiguousarray(driver.track.y_ref(xs), dtype=float)
+            c[K.C_TAB_X0], c[K.C_TAB_DX] = x_lo, PATH_TABLE_DX_M
+        if speed_controller is not None:
+            c[K.C_SPEED_ON] = 1.0
+            c[K.C_VT] = speed_controller.target_speed_mps
+            c[K.C_KP], c[K.C_KI] = speed_controller.kp_n_per_mps, speed_controller.ki_n_per_m
+            c[K.C_FLIM] = speed_controller.force_limit_n
+        self._C = c
         self.step_index = 0
         self._record = record
         self._full_chunks: list[np.ndarray] = []
@@ -727,6 +763,9 @@ class FullVehicleModel:
             hist,
             0,
             0,
+            self._cstates,
+            self._C,
+            self._ytab,
         )
         self.step_index += n
         if self._record:

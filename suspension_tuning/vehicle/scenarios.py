@@ -1,0 +1,309 @@
+"""Full-model scenarios of the paper: 'ride' (Belgian paving) and 'handling' (ISO 3888-1).
+
+``run_scenario(name, x)`` simulates a batch of designs (normalised design vectors, paper
+eqs. 4-8) and returns the objective f (eq. 9 or 10), the tyre-hop constraints g (eq. 11),
+named metrics and decimated time histories.
+
+- ride: straight run over the Belgian paving (config/road.yaml, G_d0 = 1e-4 m^3, w = 4)
+  in the ride valve state (soft spring, low damping); the design sets the soft gas volume
+  and the low-damping dpsf.  Metrics after ``settle_s``: BS 6841 W_b weighted RMS
+  vertical acceleration at the driver and rear passenger seats (full 1 kHz rate).
+- handling: ISO 3888-1 double lane change at 65 km/h on a smooth road in the handling
+  valve state (stiff spring, high damping); the design sets the stiff gas volume and the
+  high-damping dpsf.  Preview steering driver (gains frozen in config/scenarios.yaml) and
+  PI speed controller at 100 Hz.  Metrics: first roll peak in the first lane change
+  (section 2 entry to section 3 exit) and RMS roll rate over the whole manoeuvre
+  (lane 1 entry to section 6 exit).
+
+Every run starts from the solved static equilibrium; the ride road is ramped in over its
+first 5 m (config/road.yaml) and the first ``settle_s`` are discarded; the handling run
+has a straight lead-in before lane 1.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _kernel as K  # noqa: N812
+from . import comfort, design, manoeuvre, metrics
+from . import road as road_mod
+from .full_model import (
+    FullVehicleModel,
+    RoadInput,
+    SimulationRecord,
+    SuspensionSetting,
+    ValveState,
+    outputs_from_channels,
+)
+from .params import VehicleParams, load_scenarios_config, load_vehicle_params
+
+SCENARIOS = ('ride', 'handling')
+
+
+@dataclass
+class ScenarioResult:
+    """Result of one scenario for a batch of designs.
+
+    Attributes
+    ----------
+    name : str
+        Scenario name.
+    x : np.ndarray
+        Normalised designs (batch, n_vars).
+    f : np.ndarray
+        Objective (batch,): f_ride (eq. 9) or f_hand (eq. 10).
+    g : np.ndarray
+        Tyre-hop constraints (batch, 4) FL, FR, RL, RR (eq. 11), over the metric window.
+    metrics : dict
+        Named arrays (batch,) or (batch, 4).
+    histories : dict
+        Time histories at the decimated rate ('t_s' (m,), channels (batch, ..., m)).
+    wall_time_s : float
+        Wall-clock time of the simulation (excluding set-up) [s].
+    simulated_time_s : float
+        Simulated time per design [s].
+    """
+
+    name: str
+    x: np.ndarray
+    f: np.ndarray
+    g: np.ndarray
+    metrics: dict[str, np.ndarray]
+    histories: dict[str, np.ndarray] = field(repr=False)
+    wall_time_s: float
+    simulated_time_s: float
+
+
+def ride_road_spec(cfg: dict) -> road_mod.RoadSpec:
+    """Road spec of the ride scenario: config/road.yaml entry plus the overrides."""
+    spec = road_mod.load_road_spec(cfg['road'])
+    over = cfg.get('road_overrides') or {}
+    return dataclasses.replace(spec, **over) if over else spec
+
+
+@functools.lru_cache(maxsize=8)
+def _ride_road(spec: road_mod.RoadSpec, contact_length_m: float) -> tuple[RoadInput, float]:
+    prof = road_mod.synthesise_tracks(spec)
+    return RoadInput.from_profile(prof, contact_length_m), float(spec.length_m)
+
+
+def _check_name(name: str) -> None:
+    if name not in SCENARIOS:
+        raise ValueError(f'unknown scenario {name!r}; valid scenarios: {", ".join(SCENARIOS)}')
+
+
+def _settings(
+    name: str, x: np.ndarray, n_vars: int | None, params: VehicleParams
+) -> tuple[np.ndarray, SuspensionSetting]:
+    if n_vars is None:
+        n_vars = int(np.shape(x)[-1]) if np.ndim(x) >= 1 else -1
+    xv = design.validate_design(x, n_vars)
+    phys = design.to_physical(xv, n_vars)
+    return xv, SuspensionSetting.from_design(phys, name, params)
+
+
+def run_scenario(
+    name: str,
+    x: np.ndarray,
+    params: VehicleParams | None = None,
+    n_vars: int | None = None,
+    config: dict | None = None,
+) -> ScenarioResult:
+    """Simulate a scenario for one or many designs.
+
+    Parameters
+    ----------
+    name : {'ride', 'handling'}
+        Scenario.
+    x : np.ndarray
+        Normalised design(s), shape (n_vars,) or (batch, n_vars), n_vars 2 or 4
+        (paper eqs. 4-8; 0.001 <= x <= 1).
+    params : VehicleParams, optional
+        Vehicle parameters (default config/*.yaml).
+    n_vars : int, optional
+        Number of design variables (default: the length of x's last axis).
+    config : dict, optional
+        Scenario configuration (default config/scenarios.yaml).
+
+    Returns
+    -------
+    ScenarioResult
+        f (batch,), g (batch, 4), metrics, histories, wall time.
+
+    Raises
+    ------
+    ValueError
+        Unknown scenario name, or a bad design vector (wrong length, NaN, out of bounds).
+    """
+    _check_name(name)
+    params = params if params is not None else load_vehicle_params()
+    cfg = config if config is not None else load_scenarios_config()
+    xv, setting = _settings(name, x, n_vars, params)
+    if name == 'ride':
+        return _run_ride(xv, setting, params, cfg['ride'])
+    return _run_handling(xv, setting, params, cfg['handling'])
+
+
+def _histories(rec: SimulationRecord) -> dict[str, np.ndarray]:
+    out = outputs_from_channels(rec.full[:, :, :: rec.decimation], rec.hist)
+    m = rec.hist.shape[2]
+    out = {k: v[..., :m] for k, v in out.items()}
+    out['roll_deg'] = np.degrees(out.pop('roll_rad'))
+    out['roll_rate_deg_s'] = np.degrees(out.pop('roll_rate_radps'))
+    out['t_s'] = rec.t_hist_s
+    return out
+
+
+def _run_ride(
+    x: np.ndarray, setting: SuspensionSetting, params: VehicleParams, cfg: dict
+) -> ScenarioResult:
+    road, road_len = _ride_road(ride_road_spec(cfg), params.tyre.contact_length_m)
+    speed = float(cfg['speed_kmh']) / 3.6
+    duration = float(cfg['duration_s'])
+    settle = float(cfg['settle_s'])
+    x0 = float(cfg['start_rear_axle_at_m']) + params.b_m
+    if x0 + params.a_m + speed * duration > road_len:
+        raise ValueError(
+            f'ride run ({speed * duration:.0f} m) is longer than the road ({road_len:.0f} m)'
+        )
+    batch = x.shape[0]
+    hcfg = load_scenarios_config()['handling']['speed_controller']
+    sc = manoeuvre.SpeedController.from_yaml_dict(hcfg, speed)
+    model = FullVehicleModel(params, road)
+    model.reset(setting, ValveState.ride(batch), speed, x0_m=x0, speed_controller=sc)
+    rec = model.simulate(duration)
+    fs = 1.0 / rec.dt_s
+    full = outputs_from_channels(rec.full, rec.hist[:, :, :0])
+    a_d = comfort.weighted_rms(full['acc_driver_mps2'], fs, t_settle_s=settle)
+    a_p = comfort.weighted_rms(full['acc_passenger_mps2'], fs, t_settle_s=settle)
+    keep = rec.t_full_s >= settle
+    fz = full['tyre_fz_n'][..., keep]
+    g = metrics.tyre_hop_constraints(fz, rec.dt_s)
+    hist = _histories(rec)
+    met = {
+        'a_rms_driver_mps2': np.asarray(a_d),
+        'a_rms_passenger_mps2': np.asarray(a_p),
+        'roll_rms_deg': metrics.rms(np.degrees(full['roll_rad'][..., keep])),
+        'roll_rate_rms_deg_s': metrics.rms(np.degrees(full['roll_rate_radps'][..., keep])),
+        'tyre_lift_off_fraction': np.mean(fz <= metrics.FZ_CONTACT_THRESHOLD_N, axis=-1),
+        'strut_stroke_max_m': np.max(np.abs(hist['strut_stroke_m']), axis=-1),
+        'speed_mean_mps': np.mean(hist['speed_mps'], axis=-1),
+    }
+    f = metrics.f_ride(a_d, a_p)
+    return ScenarioResult('ride', x, np.asarray(f), g, met, hist, rec.wall_time_s, duration)
+
+
+def handling_setup(
+    params: VehicleParams, cfg: dict
+) -> tuple[manoeuvre.DlcTrack, manoeuvre.PreviewDriver, manoeuvre.SpeedController, float]:
+    """Build the ISO 3888-1 track, the frozen driver and the speed controller from config."""
+    t = cfg['track']
+    track = manoeuvre.dlc_cones(
+        t['vehicle_width_m'], t['offset_m'], t['offset_is_centreline'], t['path_shape']
+    )
+    driver = manoeuvre.PreviewDriver.from_yaml_dict(cfg['driver'], track, params.wheelbase_m)
+    speed = float(cfg['speed_kmh']) / 3.6
+    sc = manoeuvre.SpeedController.from_yaml_dict(cfg['speed_controller'], speed)
+    return track, driver, sc, speed
+
+
+def dlc_controller(
+    driver: manoeuvre.PreviewDriver, sc: manoeuvre.SpeedController, batch: int, period_s: float
+):
+    """Return a Python controller (preview steering + PI speed) for FullVehicleModel.
+
+    Reference for the kernel's internal controllers (same algorithms, zero-order hold).
+    """
+    integral = np.zeros(batch)
+
+    def ctrl(model: FullVehicleModel) -> tuple[np.ndarray, np.ndarray]:
+        s = model._state
+        u = s[:, K.I_U]
+        steer = driver.steer(s[:, K.I_X], s[:, K.I_Y], s[:, K.I_PSI], u, s[:, K.I_R])
+        force = sc.force(u, integral)
+        integral[:] += sc.integral_rate(u, integral) * period_s
+        return steer, force
+
+    return ctrl
+
+
+def _crossing_time(x_hist: np.ndarray, t: np.ndarray, x_target: float) -> np.ndarray:
+    return np.array([np.interp(x_target, np.maximum.accumulate(xh), t) for xh in x_hist])
+
+
+def _run_handling(
+    x: np.ndarray, setting: SuspensionSetting, params: VehicleParams, cfg: dict
+) -> ScenarioResult:
+    track, driver, sc, speed = handling_setup(params, cfg)
+    lead, run_out = float(cfg['lead_in_m']), float(cfg['run_out_m'])
+    duration = (lead + track.x_end_m + run_out) / speed
+    batch = x.shape[0]
+    model = FullVehicleModel(params, None)
+    model.reset(
+        setting, ValveState.handling(batch), speed, x0_m=-lead, driver=driver, speed_controller=sc
+    )
+    rec = model.simulate(duration)
+    hist = _histories(rec)
+    th = hist['t_s']
+    x0_lc, x1_lc = track.first_lane_change_x_m
+    t_lc = (_crossing_time(hist['x_m'], th, x0_lc), _crossing_time(hist['x_m'], th, x1_lc))
+    t_man = (_crossing_time(hist['x_m'], th, 0.0), _crossing_time(hist['x_m'], th, track.x_end_m))
+    full = outputs_from_channels(rec.full, rec.hist[:, :, :0])
+    tf = rec.t_full_s
+    roll_deg = np.degrees(full['roll_rad'])
+    rate_deg = np.degrees(full['roll_rate_radps'])
+    peak = metrics.first_peak(roll_deg, tf, t_lc)
+    rate_rms = metrics.roll_rate_rms(rate_deg, tf, t_man)
+    in_man = (tf[None, :] >= t_man[0][:, None]) & (tf[None, :] <= t_man[1][:, None])
+    fz = full['tyre_fz_n']
+    lift = np.where(in_man[:, None, :], fz <= metrics.FZ_CONTACT_THRESHOLD_N, False)
+    frac = lift.sum(-1) / in_man.sum(-1)[:, None]
+    g = 10.0 * (frac - 0.1)
+    on_track = (hist['x_m'] >= 0.0) & (hist['x_m'] <= track.x_end_m)
+    path_err = hist['y_m'] - track.y_ref(np.clip(hist['x_m'], 0.0, track.x_end_m))
+    hist['path_error_m'] = path_err
+    tcfg = cfg['track']
+    ref_front = params.a_m + 0.5 * (tcfg['vehicle_length_m'] - params.wheelbase_m)
+    xs = np.where(on_track, hist['x_m'], np.nan)
+    cone = np.array(
+        [
+            track.cone_violation(
+                xs[b][on_track[b]],
+                hist['y_m'][b][on_track[b]],
+                hist['yaw_rad'][b][on_track[b]],
+                tcfg['vehicle_width_m'],
+                tcfg['vehicle_length_m'],
+                ref_front,
+            )
+            for b in range(batch)
+        ]
+    )
+    met = {
+        'roll_first_peak_deg': peak,
+        'roll_rate_rms_deg_s': rate_rms,
+        'roll_max_deg': np.max(np.abs(roll_deg), axis=-1),
+        'lateral_accel_max_mps2': np.max(np.abs(hist['lateral_accel_mps2']), axis=-1),
+        'path_error_max_m': np.max(np.abs(np.where(on_track, path_err, 0.0)), axis=-1),
+        'cone_violation_m': cone,
+        'steer_max_deg': np.degrees(np.max(np.abs(hist['steer_rad']), axis=-1)),
+        'tyre_lift_off_fraction': frac,
+        'speed_min_mps': np.min(hist['speed_mps'], axis=-1),
+        't_first_lane_change_s': np.stack(t_lc, axis=1),
+        't_manoeuvre_s': np.stack(t_man, axis=1),
+    }
+    f = metrics.f_hand(rate_rms, peak)
+    return ScenarioResult('handling', x, np.asarray(f), g, met, hist, rec.wall_time_s, duration)
+
+
+def simulate_timed(
+    name: str, x: np.ndarray, params: VehicleParams | None = None
+) -> tuple[ScenarioResult, float]:
+    """Run a scenario and return it with the total wall time including set-up [s]."""
+    t0 = time.perf_counter()
+    res = run_scenario(name, x, params)
+    return res, time.perf_counter() - t0
