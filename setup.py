@@ -9,7 +9,10 @@ PACKAGE = 'suspension_tuning'
 # Executables: `ros2 run suspension_tuning <name>` (installed to lib/suspension_tuning
 # by setup.cfg under colcon; scripts/install_ament_files.py links them there in the venv).
 CONSOLE_SCRIPTS = [
+    'full_vehicle_sim = suspension_tuning.nodes.full_vehicle_sim:main',
     'valve_controller = suspension_tuning.nodes.valve_controller:main',
+    'coordinator = suspension_tuning.nodes.coordinator:main',
+    'tune = suspension_tuning.tune:main',
 ]
 
 setup(

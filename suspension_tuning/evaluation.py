@@ -1,0 +1,109 @@
+"""Full-model evaluation of designs as the graph exchanges it (no rclpy).
+
+The simulation node and in-process runs both go through :func:`evaluate`, so a
+design gives the same bits either way.  Requests arrive as flat arrays (ROS
+messages have no 2-D arrays): :func:`parse_designs` checks them and says exactly
+what is wrong (wrong length, NaN, out of bounds, unknown scenario).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from suspension_tuning.vehicle.design import VARIABLE_NAMES, validate_design
+from suspension_tuning.vehicle.scenarios import SCENARIOS as MODEL_SCENARIOS
+from suspension_tuning.vehicle.scenarios import ScenarioResult, run_scenario
+
+Array = NDArray[np.float64]
+TYRES = ('fl', 'fr', 'rl', 'rr')
+
+
+@dataclass
+class DesignEvaluation:
+    """Objective, constraints and named metrics of a batch of designs.
+
+    Attributes
+    ----------
+    f : ndarray, shape (m,)
+        Objective, eq. 9 or eq. 10.
+    g : ndarray, shape (m, 4)
+        Tyre-hop constraints FL, FR, RL, RR, eq. 11 (<= 0 feasible).
+    metric_names : list of str
+        Names with units; per-tyre metrics are split into ``<name>_fl`` etc.
+    metrics : ndarray, shape (m, len(metric_names))
+        Metric values.
+    result : ScenarioResult
+        The full scenario result (time histories for telemetry and the simplified
+        models).
+    """
+
+    f: Array
+    g: Array
+    metric_names: list[str]
+    metrics: Array
+    result: ScenarioResult
+
+
+def scenarios() -> tuple[str, ...]:
+    """Names of the full-model scenarios."""
+    return tuple(MODEL_SCENARIOS)
+
+
+def parse_designs(scenario: str, n_vars: int, flat: Sequence[float]) -> Array:
+    """Check a request and reshape its flat, row-major designs to (m, n_vars).
+
+    Raises
+    ------
+    ValueError
+        Unknown scenario, n_vars not 2 or 4, a length that is not a positive multiple
+        of n_vars, NaN or infinite values, or values outside 0.001..1 (eqs. 6, 8).
+    """
+    if scenario not in scenarios():
+        raise ValueError(f'unknown scenario {scenario!r}; valid: {", ".join(scenarios())}')
+    if n_vars not in VARIABLE_NAMES:
+        raise ValueError(f'n_vars must be 2 (eq. 5) or 4 (eq. 7), got {n_vars}')
+    values = np.asarray(flat, dtype=float)
+    if values.size == 0 or values.size % n_vars:
+        raise ValueError(f'designs must hold a positive multiple of n_vars = {n_vars} '
+                         f'values (row-major designs), got {values.size}')
+    return validate_design(values.reshape(-1, n_vars), n_vars)
+
+
+def metric_table(metrics: dict[str, np.ndarray], batch: int) -> tuple[list[str], Array]:
+    """Flatten named metrics of shape (m,) or (m, 4) into names and an (m, k) table."""
+    names: list[str] = []
+    columns: list[np.ndarray] = []
+    for name, value in metrics.items():
+        value = np.asarray(value, dtype=float).reshape(batch, -1)
+        if value.shape[1] == 1:
+            names.append(name)
+            columns.append(value[:, 0])
+        else:
+            labels = TYRES if value.shape[1] == 4 else range(value.shape[1])
+            for column, label in zip(value.T, labels):
+                names.append(f'{name}_{label}')
+                columns.append(column)
+    return names, np.column_stack(columns) if columns else np.zeros((batch, 0))
+
+
+def evaluate(scenario: str, designs: Array, **kwargs: Any) -> DesignEvaluation:
+    """Run the full model on a batch of designs (m, n_vars).
+
+    Parameters
+    ----------
+    scenario : str
+        'ride' or 'handling' (see :func:`scenarios`).
+    designs : ndarray, shape (m, n_vars)
+        Normalised designs, already checked by :func:`parse_designs`.
+    **kwargs
+        Passed to :func:`suspension_tuning.vehicle.scenarios.run_scenario`.
+    """
+    result = run_scenario(scenario, designs, **kwargs)
+    names, table = metric_table(result.metrics, len(designs))
+    return DesignEvaluation(f=np.asarray(result.f, float), g=np.asarray(result.g, float),
+                            metric_names=names, metrics=table, result=result)

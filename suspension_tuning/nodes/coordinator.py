@@ -1,0 +1,232 @@
+"""ROS 2 node ``coordinator``: the Dynamic-Q optimisation as an action server.
+
+Action ``~/optimise`` (Optimise): scenario, 2 or 4 variables, start point, gradient
+source 'simplified' or 'full', limits.  Each iteration asks the simulation workers
+(``/<worker>/evaluate``) for the full-model objective and constraints and the
+gradient evaluator (``<gradient_node>/gradient``) for the scaled simplified-model
+gradient, or the workers for 2n full-model central differences.  Before a run with
+simplified gradients the gradient evaluator is calibrated (eq. 25, ``calibrate``).
+
+Feedback every iteration; the result holds the optimum (also in physical units), the
+history and the full-model, simplified-model and calibration run counts.  The run's
+configuration is published on ``/optimisation/run_config`` when a goal starts, every
+iteration on ``/optimisation/progress`` and the result on ``/optimisation/result``, so
+that the recorder puts one run in one bag.  The loop itself is
+:func:`suspension_tuning.tuning.optimise`, shared with in-process runs.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import time
+from typing import Any
+
+import numpy as np
+import rclpy
+import yaml
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+from suspension_tuning_interfaces.action import Optimise
+from suspension_tuning_interfaces.msg import IterationRecord
+from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
+
+from suspension_tuning.nodes._service_calls import ServiceCallError, SimulationPool, call
+from suspension_tuning.optim.dynamic_q import load_options
+from suspension_tuning.paths import config_dir
+from suspension_tuning.tuning import (
+    FullEvaluation,
+    RunCounter,
+    TuningRequest,
+    optimise,
+    physical_settings,
+)
+
+CONFIG_DIR = config_dir()
+#: Latched: a late subscriber (the recorder) still gets the run's configuration/result.
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def code_version() -> str:
+    """``git describe`` of the source tree, or the package version outside git."""
+    try:
+        return subprocess.run(['git', 'describe', '--always', '--dirty', '--tags'],
+                              cwd=CONFIG_DIR.parent, capture_output=True, text=True,
+                              timeout=5, check=True).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        from suspension_tuning import __version__
+        return __version__
+
+
+def record_to_msg(record: dict[str, Any], counter: RunCounter, t0: float) -> IterationRecord:
+    """An optimiser history record as an IterationRecord message."""
+    return IterationRecord(
+        iteration=int(record['iteration']), x=np.asarray(record['x'], float).tolist(),
+        f=float(record['f']), g=np.asarray(record['g'], float).tolist(),
+        move_limit=float(record['rho']), max_violation=float(record['max_violation']),
+        n_full_runs=counter.full_runs, n_simplified_runs=counter.simplified_runs,
+        wall_time_s=time.monotonic() - t0)
+
+
+class CoordinatorNode(Node):
+    """Action server ``optimise`` over the simulation workers and gradient evaluator."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('coordinator', **kwargs)
+        self.declare_parameter('sim_workers', ['/full_vehicle_sim'])
+        self.declare_parameter('gradient_node', '/gradient_evaluator')
+        self.declare_parameter('call_timeout_s', 600.0)
+        self.declare_parameter('calibration_samples', 30)
+        self.declare_parameter('fd_step', 0.025)
+        self.declare_parameter('optimiser_config', '')
+        self.declare_parameter('optimiser_section', 'vehicle')
+        group = ReentrantCallbackGroup()
+        self.timeout_s = float(self.get_parameter('call_timeout_s').value)
+        self.pool = SimulationPool(self, list(self.get_parameter('sim_workers').value),
+                                   self.timeout_s)
+        gradient_node = str(self.get_parameter('gradient_node').value).rstrip('/')
+        self.gradient_client = self.create_client(EvaluateGradient, f'{gradient_node}/gradient',
+                                                  callback_group=group)
+        self.calibrate_client = self.create_client(Calibrate, f'{gradient_node}/calibrate',
+                                                   callback_group=group)
+        config = str(self.get_parameter('optimiser_config').value) or str(
+            CONFIG_DIR / 'optimiser.yaml')
+        self.options = load_options(config, str(self.get_parameter('optimiser_section').value))
+        self.progress_pub = self.create_publisher(IterationRecord, '/optimisation/progress',
+                                                  RELIABLE)
+        self.config_pub = self.create_publisher(String, '/optimisation/run_config', LATCHED)
+        self.result_pub = self.create_publisher(Optimise.Result, '/optimisation/result',
+                                                LATCHED)
+        self.server = ActionServer(self, Optimise, '~/optimise', execute_callback=self._execute,
+                                   goal_callback=lambda _: GoalResponse.ACCEPT,
+                                   cancel_callback=lambda _: CancelResponse.ACCEPT,
+                                   callback_group=group)
+
+    # ------------------------------------------------------------------ helpers
+    def _request(self, goal: Optimise.Goal) -> TuningRequest:
+        options = self.options.as_dict()
+        if goal.max_iterations:
+            options['maxiter'] = int(goal.max_iterations)
+        if goal.move_limit:
+            options['rho0'] = float(goal.move_limit)
+        return TuningRequest(goal.scenario, int(goal.n_vars), list(goal.x0) or None,
+                             goal.gradient_source or 'simplified', options,
+                             float(self.get_parameter('fd_step').value))
+
+    def _publish_run_config(self, request: TuningRequest) -> None:
+        config = {
+            'scenario': request.scenario, 'n_vars': request.n_vars,
+            'x0': request.start.tolist(), 'gradient_source': request.gradient_source,
+            'optimiser_options': request.options, 'fd_step': request.fd_step,
+            'coordinator_parameters': {name: p.value for name, p in
+                                       self.get_parameters_by_prefix('').items()},
+            'vehicle_configuration': {path.name: yaml.safe_load(path.read_text())
+                                      for path in sorted(CONFIG_DIR.glob('*.yaml'))},
+            'code_version': code_version(),
+            'started_unix_s': time.time(),
+        }
+        self.config_pub.publish(String(data=yaml.safe_dump(config, sort_keys=False)))
+
+    def _full_model(self, request: TuningRequest):
+        def evaluate(designs: np.ndarray) -> FullEvaluation:
+            responses = self.pool.evaluate(
+                request.scenario, request.n_vars, designs,
+                return_inputs=request.gradient_source == 'simplified' and len(designs) == 1)
+            f = np.concatenate([np.asarray(r.f, float) for r in responses])
+            g = np.concatenate([np.asarray(r.g, float).reshape(r.n_designs, r.n_constraints)
+                                for r in responses])
+            return FullEvaluation(f=f, g=g, inputs=responses[0].inputs)
+        return evaluate
+
+    def _simplified_gradient(self, request: TuningRequest):
+        def gradient(x: np.ndarray, inputs: Any) -> tuple[np.ndarray, np.ndarray]:
+            response = call(self, self.gradient_client, EvaluateGradient.Request(
+                scenario=request.scenario, n_vars=request.n_vars, x=x.tolist(),
+                step=request.fd_step, inputs=inputs), self.timeout_s)
+            if not response.success:
+                raise ValueError(f'gradient evaluator: {response.error}')
+            dg = np.asarray(response.dg, float).reshape(response.n_constraints, request.n_vars)
+            return np.asarray(response.df, float), dg
+        return gradient
+
+    def _calibrate(self, request: TuningRequest) -> Calibrate.Response:
+        response = call(self, self.calibrate_client, Calibrate.Request(
+            scenario=request.scenario, n_vars=request.n_vars,
+            n_samples=int(self.get_parameter('calibration_samples').value), force=False),
+            self.timeout_s * 2)
+        if not response.success:
+            raise ValueError(f'calibration failed: {response.error}')
+        return response
+
+    # ------------------------------------------------------------------ action
+    def _execute(self, goal_handle) -> Optimise.Result:
+        t0 = time.monotonic()
+        try:
+            request = self._request(goal_handle.request)
+        except ValueError as error:
+            goal_handle.abort()
+            return Optimise.Result(success=False, message=f'bad goal: {error}')
+        self.get_logger().info(f'optimising {request.scenario} with {request.n_vars} '
+                               f'variables, {request.gradient_source} gradients')
+        self._publish_run_config(request)
+        counter = RunCounter()
+        history_msgs: list[IterationRecord] = []
+
+        def on_iteration(record: dict[str, Any], counts: RunCounter) -> bool:
+            msg = record_to_msg(record, counts, t0)
+            history_msgs.append(msg)
+            goal_handle.publish_feedback(Optimise.Feedback(latest=msg))
+            self.progress_pub.publish(msg)
+            return goal_handle.is_cancel_requested
+
+        try:
+            if request.gradient_source == 'simplified':
+                counter.calibration_runs = int(self._calibrate(request).n_full_runs)
+            result = optimise(request, self._full_model(request),
+                              self._simplified_gradient(request), on_iteration,
+                              counter=counter)
+        except (ValueError, ServiceCallError) as error:
+            self.get_logger().error(f'optimisation failed: {error}')
+            goal_handle.abort()
+            message = Optimise.Result(success=False, message=str(error), history=history_msgs,
+                                      wall_time_s=time.monotonic() - t0, **counter.as_dict())
+            self.result_pub.publish(message)
+            return message
+        physical = physical_settings(result.x)
+        message = Optimise.Result(
+            success=bool(result.success), message=str(result.message),
+            x=np.asarray(result.x, float).tolist(), f=float(result.f),
+            g=np.asarray(result.g, float).tolist(), physical_names=list(physical),
+            physical_values=list(physical.values()), iterations=int(result.nit),
+            history=history_msgs, wall_time_s=time.monotonic() - t0, **counter.as_dict())
+        if goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+            message.message = 'cancelled'
+        else:
+            goal_handle.succeed()
+        self.result_pub.publish(message)
+        return message
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run suspension_tuning coordinator``."""
+    rclpy.init(args=args)
+    node = CoordinatorNode()
+    executor = MultiThreadedExecutor()
+    executor.add_node(node)
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,156 @@
+"""ROS 2 node ``full_vehicle_sim``: the full nonlinear vehicle model as a service.
+
+Service ``~/evaluate`` (EvaluateDesign): a scenario and one or many designs in; the
+objective f (eq. 9 or 10), the tyre-hop constraints g (eq. 11), named metrics, the
+simplified models' inputs of the first design and the wall time out.  A bad request
+(unknown scenario, wrong length, NaN, out of bounds) gets ``success = false`` and the
+reason in ``error``; the node keeps serving.
+
+On request it publishes the time histories of the first design as telemetry on
+standard types, stamped with simulated time: ``~/telemetry/imu`` (sensor_msgs/Imu,
+body), ``~/telemetry/struts`` (JointState: stroke m, stroke rate m/s, force N per
+strut), ``~/telemetry/tyres`` (JointState: slip angle rad, normal force N),
+``~/telemetry/seats`` (JointState: driver and passenger vertical acceleration m/s^2 as
+effort) and ``~/telemetry/steering`` (JointState: front road-wheel angle).
+
+Several workers run as ``--ros-args -r __node:=sim_0`` etc.; each serves its own
+``/<name>/evaluate``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import rclpy
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data, qos_profile_services_default
+from rclpy.service_introspection import ServiceIntrospectionState
+from sensor_msgs.msg import Imu, JointState
+from suspension_tuning_interfaces.msg import TimeHistories
+from suspension_tuning_interfaces.srv import EvaluateDesign
+
+from suspension_tuning import evaluation, simplified_inputs
+from suspension_tuning.vehicle.simplified import SimplifiedInputs
+
+CORNERS = ['FL', 'FR', 'RL', 'RR']
+
+
+def stamp(node: Node, t_s: float):
+    """A builtin_interfaces/Time of simulated time t_s."""
+    msg = node.get_clock().now().to_msg()
+    msg.sec = int(math.floor(t_s))
+    msg.nanosec = int(round((t_s - math.floor(t_s)) * 1e9)) % 1_000_000_000
+    return msg
+
+
+def quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of body Euler angles roll-pitch-yaw (rad, ZYX convention)."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
+
+
+class FullVehicleSimNode(Node):
+    """Service adapter over :func:`suspension_tuning.evaluation.evaluate`."""
+
+    def __init__(self, name: str = 'full_vehicle_sim', **kwargs) -> None:
+        super().__init__(name, **kwargs)
+        self.declare_parameter('telemetry_decimation', 2)
+        service = self.create_service(EvaluateDesign, '~/evaluate', self._on_evaluate)
+        service.configure_introspection(self.get_clock(), qos_profile_services_default,
+                                        ServiceIntrospectionState.CONTENTS)
+        self.pub = {name: self.create_publisher(kind, f'~/telemetry/{name}',
+                                                qos_profile_sensor_data)
+                    for name, kind in (('imu', Imu), ('struts', JointState),
+                                       ('tyres', JointState), ('seats', JointState),
+                                       ('steering', JointState))}
+        self.runs = 0
+
+    def _on_evaluate(self, request: EvaluateDesign.Request,
+                     response: EvaluateDesign.Response) -> EvaluateDesign.Response:
+        start = time.monotonic()
+        try:
+            designs = evaluation.parse_designs(request.scenario, int(request.n_vars),
+                                               request.designs)
+            result = evaluation.evaluate(request.scenario, designs)
+        except ValueError as error:
+            response.success = False
+            response.error = str(error)
+            self.get_logger().warning(f'bad evaluate request: {error}')
+            return response
+        except Exception as error:  # noqa: BLE001 - a failed run must not kill the worker
+            response.success = False
+            response.error = f'simulation failed: {type(error).__name__}: {error}'
+            self.get_logger().error(response.error)
+            return response
+        self.runs += len(designs)
+        response.success = True
+        response.n_designs = len(designs)
+        response.f = result.f.tolist()
+        response.n_constraints = result.g.shape[1]
+        response.g = result.g.ravel().tolist()
+        response.metric_names = result.metric_names
+        response.metrics = result.metrics.ravel().tolist()
+        if request.return_inputs:
+            response.inputs = simplified_inputs.pack(
+                SimplifiedInputs.from_scenario_result(result.result, 0), TimeHistories())
+        if request.publish_telemetry:
+            self.publish_telemetry(result.result.histories)
+        response.wall_time_s = time.monotonic() - start
+        return response
+
+    def publish_telemetry(self, histories: dict[str, np.ndarray], index: int = 0) -> None:
+        """Publish the time histories of design ``index`` on the telemetry topics."""
+        step = max(1, int(self.get_parameter('telemetry_decimation').value))
+        h = {name: np.asarray(value)[index] for name, value in histories.items()
+             if name != 't_s'}
+        for k in range(0, len(histories['t_s']), step):
+            now = stamp(self, float(histories['t_s'][k]))
+            imu = Imu()
+            imu.header.stamp, imu.header.frame_id = now, 'base_link'
+            (imu.orientation.x, imu.orientation.y, imu.orientation.z,
+             imu.orientation.w) = quaternion(math.radians(h['roll_deg'][k]),
+                                             float(h['pitch_rad'][k]), float(h['yaw_rad'][k]))
+            imu.angular_velocity.x = math.radians(h['roll_rate_deg_s'][k])
+            imu.angular_velocity.z = float(h['yaw_rate_radps'][k])
+            imu.linear_acceleration.y = float(h['lateral_accel_mps2'][k])
+            imu.linear_acceleration_covariance[0] = -1.0  # only lateral is known
+            self.pub['imu'].publish(imu)
+            self.pub['struts'].publish(JointState(
+                header=imu.header, name=CORNERS,
+                position=h['strut_stroke_m'][:, k].tolist(),
+                effort=h['strut_force_n'][:, k].tolist()))
+            self.pub['tyres'].publish(JointState(
+                header=imu.header, name=CORNERS, position=h['slip_angle_rad'][:, k].tolist(),
+                effort=h['tyre_fz_n'][:, k].tolist()))
+            self.pub['seats'].publish(JointState(
+                header=imu.header, name=['driver', 'passenger'],
+                effort=[float(h['acc_driver_mps2'][k]), float(h['acc_passenger_mps2'][k])]))
+            self.pub['steering'].publish(JointState(
+                header=imu.header, name=['front_road_wheel'],
+                position=[float(h['steer_rad'][k])],
+                velocity=[float(h['steer_rate_radps'][k])]))
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run suspension_tuning full_vehicle_sim``."""
+    rclpy.init(args=args)
+    node = FullVehicleSimNode()
+    executor = MultiThreadedExecutor()
+    executor.add_node(node)
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()
