@@ -1,0 +1,215 @@
+"""Gradients from the eq. 25-scaled simplified models (Thoresson et al. 2009, section 6).
+
+* :func:`simplified_values` - objective and constraints of the simplified model of a
+  scenario for a batch of designs, optionally scaled by eq. 25.
+* :func:`calibrate` - the eq. 25 scaling from N full-model samples (default 30 [P]):
+  one batched full run of the samples, the simplified model at the same designs (for
+  handling each sample uses the inputs captured from its own full run, as at an
+  iterate), then :func:`scaling.fit_scaling`.  :func:`load_or_calibrate` keeps it in a
+  JSON file keyed by scenario, n_vars, n_samples, seed and config hash.
+* :class:`SimplifiedGradient` - central differences of the scaled simplified model: the
+  gradient of f and the Jacobian of g from ONE batch of the 2n stencil points of
+  ``finite_diff.central_difference`` (shifted inside the bounds, never outside).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from suspension_tuning.optim.finite_diff import central_difference
+from suspension_tuning.optim.scaling import Scaling, fit_scaling, sample_design_space, scaling_key
+from suspension_tuning.vehicle.design import X_LOWER, X_UPPER, validate_design
+from suspension_tuning.vehicle.handling_model import HandlingInputs
+from suspension_tuning.vehicle.pitch_plane import load_simplified_config
+from suspension_tuning.vehicle.simplified import SimplifiedInputs, run_simplified
+
+Array = NDArray[np.float64]
+
+
+def as_simplified_inputs(scenario: str, inputs: Any) -> SimplifiedInputs | None:
+    """Normalise what a caller passes as the full model's inputs.
+
+    Accepts None (ride), :class:`SimplifiedInputs`, :class:`HandlingInputs`, a
+    ``scenarios.ScenarioResult`` (first design) or any object with a ``result`` attribute
+    holding one (e.g. ``evaluation.DesignEvaluation``).
+    """
+    if inputs is None:
+        if scenario == 'handling':
+            raise ValueError('the handling gradient needs the full model inputs (steer, slip)')
+        return SimplifiedInputs(scenario)
+    if isinstance(inputs, SimplifiedInputs):
+        if inputs.scenario != scenario:
+            raise ValueError(f'inputs are for scenario {inputs.scenario!r}, not {scenario!r}')
+        return inputs
+    if isinstance(inputs, HandlingInputs):
+        return SimplifiedInputs('handling', None, inputs)
+    result = getattr(inputs, 'result', inputs)
+    if hasattr(result, 'histories') and hasattr(result, 'name'):
+        return as_simplified_inputs(scenario, SimplifiedInputs.from_scenario_result(result))
+    raise ValueError(f'cannot use {type(inputs).__name__} as simplified-model inputs')
+
+
+def simplified_values(
+    scenario: str,
+    x: ArrayLike,
+    n_vars: int,
+    inputs: Any = None,
+    scaling: Scaling | None = None,
+) -> Array:
+    """Simplified-model values (batch, 1 + 4): objective then constraints FL..RR.
+
+    Scaled by eq. 25 when ``scaling`` is given.
+    """
+    inp = as_simplified_inputs(scenario, inputs)
+    out = run_simplified(scenario, x, n_vars, inp)
+    vals = np.column_stack([out['f'], out['g']])
+    return scaling.apply(vals) if scaling is not None else vals
+
+
+def calibrate(
+    scenario: str,
+    n_vars: int,
+    n_samples: int | None = None,
+    seed: int | None = None,
+    run_full=None,
+) -> Scaling:
+    """Fit the eq. 25 scaling from N full-model samples over the design space.
+
+    Parameters
+    ----------
+    scenario : {'ride', 'handling'}
+        Scenario.
+    n_vars : int
+        2 or 4.
+    n_samples, seed : int, optional
+        Number of samples and LHS seed (default config/simplified_models.yaml scaling).
+    run_full : callable, optional
+        ``run_full(scenario, x (N, n)) -> ScenarioResult`` (default
+        ``scenarios.run_scenario``); all N designs go in one batch.
+
+    Returns
+    -------
+    Scaling
+        With the samples, both models' values and the key.
+    """
+    cfg = load_simplified_config()['scaling']
+    n_samples = int(cfg['n_samples'] if n_samples is None else n_samples)
+    seed = int(cfg['seed'] if seed is None else seed)
+    x = sample_design_space(
+        n_vars, n_samples, seed, bool(cfg['include_corners']), int(cfg['lhs_candidates'])
+    )
+    if run_full is None:
+        from suspension_tuning.vehicle.scenarios import run_scenario as run_full
+    res = run_full(scenario, x)
+    full = np.column_stack([res.f, res.g])
+    if scenario == 'ride':
+        simp = simplified_values('ride', x, n_vars)
+    else:
+        simp = np.vstack(
+            [
+                simplified_values(
+                    scenario, x[i], n_vars, SimplifiedInputs.from_scenario_result(res, i)
+                )
+                for i in range(n_samples)
+            ]
+        )
+    return fit_scaling(x, full, simp, key=scaling_key(scenario, n_vars, n_samples, seed))
+
+
+def load_or_calibrate(
+    path: str | Path,
+    scenario: str,
+    n_vars: int,
+    n_samples: int | None = None,
+    seed: int | None = None,
+) -> tuple[Scaling, bool]:
+    """Load the scaling from ``path`` if its key matches, else calibrate and save it.
+
+    Returns
+    -------
+    (Scaling, bool)
+        The scaling and whether it was loaded from the cache.
+    """
+    cfg = load_simplified_config()['scaling']
+    n_samples = int(cfg['n_samples'] if n_samples is None else n_samples)
+    seed = int(cfg['seed'] if seed is None else seed)
+    key = scaling_key(scenario, n_vars, n_samples, seed)
+    path = Path(path)
+    if path.exists():
+        try:
+            return Scaling.load(path, expected_key=key), True
+        except ValueError:
+            pass  # stale or unreadable cache: recalibrate below
+    sc = calibrate(scenario, n_vars, n_samples, seed)
+    sc.save(path)
+    return sc, False
+
+
+class SimplifiedGradient:
+    """Central-difference gradient source on the scaled simplified model.
+
+    Parameters
+    ----------
+    scenario : {'ride', 'handling'}
+        Scenario.
+    n_vars : int
+        2 or 4.
+    scaling : Scaling, optional
+        Eq. 25 scaling (unscaled simplified gradients without it).
+    step : float, optional
+        Central-difference half step in normalised units (default
+        config/simplified_models.yaml gradient.step, 0.025).
+
+    Notes
+    -----
+    ``__call__(x, inputs)`` matches ``tuning.SimplifiedGradient``: it returns
+    ``(df (n,), dg (4, n))`` and counts 2n simplified runs in ``n_runs``.
+    """
+
+    def __init__(
+        self,
+        scenario: str,
+        n_vars: int,
+        scaling: Scaling | None = None,
+        step: float | None = None,
+    ) -> None:
+        if scenario not in ('ride', 'handling'):
+            raise ValueError(f"unknown scenario {scenario!r}; valid: 'ride', 'handling'")
+        validate_design(np.full(n_vars, X_UPPER), n_vars)
+        if scaling is not None:
+            for k, v in (('scenario', scenario), ('n_vars', n_vars)):
+                if k in scaling.key and scaling.key[k] != v:
+                    raise ValueError(f'scaling is for {k}={scaling.key[k]!r}, not {v!r}')
+        self.scenario = scenario
+        self.n_vars = int(n_vars)
+        self.scaling = scaling
+        step = load_simplified_config()['gradient']['step'] if step is None else step
+        if not (np.isfinite(step) and 0.0 < step <= 0.25):
+            raise ValueError(f'step must lie in (0, 0.25], got {step}')
+        self.step = float(step)
+        self.lower = np.full(self.n_vars, X_LOWER)
+        self.upper = np.full(self.n_vars, X_UPPER)
+        self.n_runs = 0
+        self.n_calls = 0
+
+    def values(self, x: ArrayLike, inputs: Any = None) -> Array:
+        """Scaled simplified values (batch, 5) at designs x (counted as runs)."""
+        xb = validate_design(x, self.n_vars)
+        self.n_runs += xb.shape[0]
+        return simplified_values(self.scenario, xb, self.n_vars, inputs, self.scaling)
+
+    def __call__(self, x: ArrayLike, inputs: Any = None) -> tuple[Array, Array]:
+        """Gradient of f (n,) and Jacobian of g (4, n) at x (one batch of 2n runs)."""
+        x1 = validate_design(x, self.n_vars)
+        if x1.shape[0] != 1:
+            raise ValueError(f'gradient needs one design, got {x1.shape[0]}')
+        inp = as_simplified_inputs(self.scenario, inputs)
+        jac = central_difference(
+            lambda pts: self.values(pts, inp), x1[0], self.step, self.lower, self.upper
+        )
+        self.n_calls += 1
+        return jac[0], jac[1:]
