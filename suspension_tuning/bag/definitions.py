@@ -140,8 +140,15 @@ def _sections(path: Path) -> list[str]:
     return ['\n'.join(p).strip('\n') + '\n' if any(s.strip() for s in p) else '' for p in parts]
 
 
-def _python_class(full_name: str) -> type:
-    """The generated Python class of ``pkg/kind/Name`` (e.g. ``..._Event``)."""
+def message_class(type_name: str) -> type:
+    """The generated Python class of ``pkg/kind/Name`` (also ``T_Event``, ``T_FeedbackMessage``).
+
+    Raises
+    ------
+    DefinitionNotFoundError
+        If the module or the class cannot be imported.
+    """
+    full_name = normalise_type_name(type_name)
     package, kind, name = full_name.split('/')
     try:
         module = importlib.import_module(f'{package}.{kind}')
@@ -197,7 +204,7 @@ def _generated(full_name: str) -> tuple[str, list[str]]:
     Returns the text and the full names of its dependencies (the short ``pkg/Name`` in
     the text loses the ``srv``/``action`` namespace, the class still knows it).
     """
-    msg_class = _python_class(full_name)
+    msg_class = message_class(full_name)
     names = list(msg_class.get_fields_and_field_types())
     lines = [f'{_idl_to_msg(t)} {n}' for t, n in zip(msg_class.SLOT_TYPES, names)]
     deps: list[str] = []

@@ -1,0 +1,204 @@
+"""Recording session (plain Python): which bag a message goes to, one bag per run.
+
+The ``recorder`` node (:mod:`suspension_tuning.nodes.recorder`) feeds every received
+message (raw CDR, receive and send times) to :meth:`RecordingSession.write`.  With
+``per_run`` the session opens a new bag ``<YYYYmmdd-HHMMSS>_<scenario>`` when a message
+arrives on ``/optimisation/run_config`` (std_msgs/String, the run's configuration
+YAML; it marks the start of a run) and closes it after ``/optimisation/result`` (the
+end of the run); messages between runs are counted and dropped.  Without
+``per_run`` everything goes to one bag for the whole session.  The run configuration
+is also stored as the MCAP metadata record ``run_config``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import struct
+import threading
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from suspension_tuning.bag.writer import (
+    DEFAULT_CHUNK_INTERVAL_S,
+    DEFAULT_CHUNK_SIZE,
+    BagWriter,
+)
+
+#: Topic whose message marks the start of a run (graph contract, brief/graph_api.md).
+RUN_CONFIG_TOPIC = '/optimisation/run_config'
+#: Topic whose message marks the end of a run.
+RESULT_TOPIC = '/optimisation/result'
+
+
+def decode_cdr_string(data: bytes) -> str:
+    """The ``data`` field of a serialized std_msgs/String (CDR, either endianness).
+
+    Raises
+    ------
+    ValueError
+        If the bytes are not a CDR-encoded string message.
+    """
+    if len(data) < 8 or data[0] != 0 or data[1] not in (0, 1):
+        raise ValueError('not a CDR message (bad encapsulation header)')
+    (length,) = struct.unpack_from('<I' if data[1] else '>I', data, 4)
+    if length == 0 or 8 + length > len(data):
+        raise ValueError(f'CDR string length {length} does not fit in {len(data)} bytes')
+    return data[8 : 8 + length - 1].decode('utf-8')
+
+
+def run_bag_name(scenario: str, when_ns: int | None = None) -> str:
+    """``<YYYYmmdd-HHMMSS>_<scenario>`` (UTC), scenario reduced to [A-Za-z0-9_-]."""
+    seconds = (time.time_ns() if when_ns is None else when_ns) / 1e9
+    stamp = time.strftime('%Y%m%d-%H%M%S', time.gmtime(seconds))
+    safe = re.sub(r'[^A-Za-z0-9_-]+', '-', scenario).strip('-') or 'run'
+    return f'{stamp}_{safe}'
+
+
+def run_config_metadata(text: str) -> dict[str, str]:
+    """MCAP metadata record ``run_config``: the YAML text and its top-level scalars."""
+    record = {'yaml': text}
+    try:
+        loaded = yaml.safe_load(text)
+    except yaml.YAMLError:
+        loaded = None
+    if isinstance(loaded, Mapping):
+        for key, value in loaded.items():
+            if isinstance(value, str | int | float | bool) and str(key) != 'yaml':
+                record[str(key)] = str(value)
+    return record
+
+
+@dataclass
+class TopicSpec:
+    """What the session knows about a topic before any bag holds it."""
+
+    name: str
+    type: str
+    offered_qos_profiles: list[dict[str, Any]] = field(default_factory=list)
+
+
+class RecordingSession:
+    """Route messages into bags under ``output_dir`` (thread-safe).
+
+    Parameters
+    ----------
+    output_dir : str or Path
+        Folder of the bags (created).
+    bag_name : str
+        Name of the session bag (``per_run`` False); '' = ``<YYYYmmdd-HHMMSS>_session``.
+    per_run : bool
+        One bag per optimisation run (see module docstring).
+    chunk_size : int
+        Chunk size of the bags, bytes.
+    max_chunk_interval_s : float
+        Longest time a chunk stays open, s.
+    """
+
+    def __init__(
+        self,
+        output_dir: str | os.PathLike[str],
+        bag_name: str = '',
+        per_run: bool = True,
+        chunk_size: int = DEFAULT_CHUNK_SIZE,
+        max_chunk_interval_s: float = DEFAULT_CHUNK_INTERVAL_S,
+    ) -> None:
+        self.output_dir = Path(output_dir)
+        self.bag_name = bag_name
+        self.per_run = per_run
+        self.chunk_size = chunk_size
+        self.max_chunk_interval_s = max_chunk_interval_s
+        self.topics: dict[str, TopicSpec] = {}
+        self.bag: BagWriter | None = None
+        self.closed_bags: list[Path] = []
+        self.dropped = 0
+        self._lock = threading.Lock()
+
+    def add_topic(
+        self, topic: str, type_name: str, offered_qos_profiles: Sequence[Mapping[str, Any]] = ()
+    ) -> None:
+        """Declare a topic; it enters a bag with its first message."""
+        with self._lock:
+            self.topics[topic] = TopicSpec(
+                topic, type_name, [dict(p) for p in offered_qos_profiles]
+            )
+
+    def _unique(self, name: str) -> Path:
+        path = self.output_dir / name
+        k = 1
+        while path.exists():
+            path = self.output_dir / f'{name}_{k}'
+            k += 1
+        return path
+
+    def _open(self, name: str) -> BagWriter:
+        self.output_dir.mkdir(parents=True, exist_ok=True)
+        self.bag = BagWriter(
+            self._unique(name),
+            chunk_size=self.chunk_size,
+            max_chunk_interval_s=self.max_chunk_interval_s,
+        )
+        return self.bag
+
+    def _close_bag(self) -> Path | None:
+        if self.bag is None:
+            return None
+        path = self.bag.close()
+        self.closed_bags.append(path)
+        self.bag = None
+        return path
+
+    def write(
+        self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None = None
+    ) -> Path | None:
+        """Record one message; returns the path of a bag that this message closed, if any.
+
+        Raises
+        ------
+        ValueError
+            If the topic was not declared with :meth:`add_topic`.
+        """
+        with self._lock:
+            if topic not in self.topics:
+                raise ValueError(f'topic {topic} was not declared with add_topic()')
+            spec = self.topics[topic]
+            if self.per_run and topic == RUN_CONFIG_TOPIC:
+                text = decode_cdr_string(data)
+                loaded = yaml.safe_load(text) if text.strip() else {}
+                scenario = (
+                    str(loaded.get('scenario', 'run')) if isinstance(loaded, dict) else 'run'
+                )
+                self._close_bag()  # a run that never sent its result ends here
+                bag = self._open(run_bag_name(scenario, log_time_ns))
+                bag.add_metadata('run_config', run_config_metadata(text))
+                bag.custom_data['scenario'] = scenario
+            elif self.bag is None:
+                if self.per_run:
+                    self.dropped += 1
+                    return None
+                self._open(self.bag_name or run_bag_name('session', log_time_ns))
+            bag = self.bag
+            if not self.per_run and topic == RUN_CONFIG_TOPIC:
+                bag.add_metadata('run_config', run_config_metadata(decode_cdr_string(data)))
+            if topic not in bag.topics:
+                bag.add_topic(topic, spec.type, spec.offered_qos_profiles)
+            bag.write(topic, data, log_time_ns, publish_time_ns)
+            if self.per_run and topic == RESULT_TOPIC:
+                return self._close_bag()
+            return None
+
+    def flush(self) -> None:
+        """Push the open chunk of the open bag to disk."""
+        with self._lock:
+            if self.bag is not None:
+                self.bag.flush()
+
+    def close(self) -> Path | None:
+        """Finalise the open bag (summary, metadata.yaml); returns its path."""
+        with self._lock:
+            return self._close_bag()
