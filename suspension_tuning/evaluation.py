@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from suspension_tuning.vehicle.design import VARIABLE_NAMES, validate_design
+from suspension_tuning.vehicle.mixed import run_mixed
 from suspension_tuning.vehicle.scenarios import SCENARIOS as MODEL_SCENARIOS
 from suspension_tuning.vehicle.scenarios import ScenarioResult, run_scenario
 
@@ -50,8 +51,8 @@ class DesignEvaluation:
 
 
 def scenarios() -> tuple[str, ...]:
-    """Names of the full-model scenarios."""
-    return tuple(MODEL_SCENARIOS)
+    """Names of the full-model scenarios ('mixed': closed-loop valve control)."""
+    return (*MODEL_SCENARIOS, 'mixed')
 
 
 def parse_designs(scenario: str, n_vars: int, flat: Sequence[float]) -> Array:
@@ -91,19 +92,26 @@ def metric_table(metrics: dict[str, np.ndarray], batch: int) -> tuple[list[str],
     return names, np.column_stack(columns) if columns else np.zeros((batch, 0))
 
 
-def evaluate(scenario: str, designs: Array, **kwargs: Any) -> DesignEvaluation:
+def evaluate(scenario: str, designs: Array, controllers: list | None = None,
+             **kwargs: Any) -> DesignEvaluation:
     """Run the full model on a batch of designs (m, n_vars).
 
     Parameters
     ----------
     scenario : str
-        'ride' or 'handling' (see :func:`scenarios`).
+        'ride', 'handling' or 'mixed' (see :func:`scenarios`).
     designs : ndarray, shape (m, n_vars)
         Normalised designs, already checked by :func:`parse_designs`.
+    controllers : list of callables, optional
+        Valve controllers of the 'mixed' scenario, one per design (default in-process;
+        see :func:`suspension_tuning.vehicle.mixed.run_mixed`).
     **kwargs
         Passed to :func:`suspension_tuning.vehicle.scenarios.run_scenario`.
     """
-    result = run_scenario(scenario, designs, **kwargs)
+    if scenario == 'mixed':
+        result = run_mixed(designs, controllers, **kwargs)
+    else:
+        result = run_scenario(scenario, designs, **kwargs)
     names, table = metric_table(result.metrics, len(designs))
     return DesignEvaluation(f=np.asarray(result.f, float), g=np.asarray(result.g, float),
                             metric_names=names, metrics=table, result=result)

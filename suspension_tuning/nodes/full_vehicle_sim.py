@@ -13,6 +13,12 @@ strut), ``~/telemetry/tyres`` (JointState: slip angle rad, normal force N),
 ``~/telemetry/seats`` (JointState: driver and passenger vertical acceleration m/s^2 as
 effort) and ``~/telemetry/steering`` (JointState: front road-wheel angle).
 
+Scenario ``mixed`` runs closed-loop against the valve controller on simulated time:
+for each control period the node publishes ``/clock`` and ``/vehicle/state`` (step k)
+and waits for ``/suspension/valve_state`` answering step k before it integrates on,
+so the run is step-locked and deterministic (parameter ``valve_controller``: 'ros',
+or 'inprocess' for the same controller without topics).
+
 Several workers run as ``--ros-args -r __node:=sim_0`` etc.; each serves its own
 ``/<name>/evaluate``.
 """
@@ -20,22 +26,66 @@ Several workers run as ``--ros-args -r __node:=sim_0`` etc.; each serves its own
 from __future__ import annotations
 
 import math
+import threading
 import time
 
 import numpy as np
 import rclpy
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data, qos_profile_services_default
+from rclpy.qos import (
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+    qos_profile_services_default,
+)
 from rclpy.service_introspection import ServiceIntrospectionState
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
-from suspension_tuning_interfaces.msg import TimeHistories
+from suspension_tuning_interfaces.msg import TimeHistories, ValveState, VehicleState
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
 from suspension_tuning import evaluation, simplified_inputs
 from suspension_tuning.vehicle.simplified import SimplifiedInputs
 
 CORNERS = ['FL', 'FR', 'RL', 'RR']
+#: Vehicle states and valve states must not be dropped in a step-locked run.
+RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+
+class TopicValveController:
+    """A mixed-scenario valve controller reached over topics, step-locked.
+
+    Each call publishes ``/clock`` and the vehicle state of step k, then waits until the
+    valve controller node answers step k on ``/suspension/valve_state``.
+    """
+
+    def __init__(self, node: FullVehicleSimNode, timeout_s: float) -> None:
+        self.node = node
+        self.timeout_s = timeout_s
+
+    def __call__(self, step: int, state: dict) -> tuple[int, int, int, int]:
+        """Publish step ``step``'s state and return the valve state answering it."""
+        node = self.node
+        sim_time = stamp(node, state['t_s'])
+        node.clock_pub.publish(Clock(clock=sim_time))
+        msg = VehicleState(step=step, speed_mps=state['speed_mps'],
+                           lateral_acceleration_mps2=state['lateral_acceleration_mps2'],
+                           roll_angle_rad=state['roll_angle_rad'],
+                           roll_rate_radps=state['roll_rate_radps'],
+                           steering_angle_rad=state['steering_angle_rad'],
+                           steering_rate_radps=state['steering_rate_radps'],
+                           strut_pressure_pa=list(state['strut_pressure_pa']))
+        msg.header.stamp, msg.header.frame_id = sim_time, 'base_link'
+        with node.valve_answer:
+            node.valve_answers.clear()
+            node.state_pub.publish(msg)
+            if not node.valve_answer.wait_for(lambda: step in node.valve_answers,
+                                              self.timeout_s):
+                raise RuntimeError(f'no valve state for step {step} within {self.timeout_s} s: '
+                                   'is the valve_controller node running?')
+            return node.valve_answers[step]
 
 
 def stamp(node: Node, t_s: float):
@@ -61,6 +111,14 @@ class FullVehicleSimNode(Node):
     def __init__(self, name: str = 'full_vehicle_sim', **kwargs) -> None:
         super().__init__(name, **kwargs)
         self.declare_parameter('telemetry_decimation', 2)
+        self.declare_parameter('valve_controller', 'ros')
+        self.declare_parameter('closed_loop_timeout_s', 5.0)
+        self.clock_pub = self.create_publisher(Clock, '/clock', 10)
+        self.state_pub = self.create_publisher(VehicleState, '/vehicle/state', RELIABLE)
+        self.valve_answer = threading.Condition()
+        self.valve_answers: dict[int, tuple[int, int, int, int]] = {}
+        self.create_subscription(ValveState, '/suspension/valve_state', self._on_valve_state,
+                                 RELIABLE, callback_group=MutuallyExclusiveCallbackGroup())
         service = self.create_service(EvaluateDesign, '~/evaluate', self._on_evaluate)
         service.configure_introspection(self.get_clock(), qos_profile_services_default,
                                         ServiceIntrospectionState.CONTENTS)
@@ -77,7 +135,8 @@ class FullVehicleSimNode(Node):
         try:
             designs = evaluation.parse_designs(request.scenario, int(request.n_vars),
                                                request.designs)
-            result = evaluation.evaluate(request.scenario, designs)
+            result = evaluation.evaluate(request.scenario, designs,
+                                         controllers=self._controllers(request, designs))
         except ValueError as error:
             response.success = False
             response.error = str(error)
@@ -103,6 +162,22 @@ class FullVehicleSimNode(Node):
             self.publish_telemetry(result.result.histories)
         response.wall_time_s = time.monotonic() - start
         return response
+
+    def _controllers(self, request, designs) -> list | None:
+        """Valve controllers of a mixed run over ROS (one design at a time)."""
+        if request.scenario != 'mixed' or self.get_parameter('valve_controller').value != 'ros':
+            return None
+        if len(designs) != 1:
+            raise ValueError('the mixed scenario runs closed-loop over ROS one design at a '
+                             f'time (one valve controller node), got {len(designs)} designs')
+        timeout = float(self.get_parameter('closed_loop_timeout_s').value)
+        return [TopicValveController(self, timeout)]
+
+    def _on_valve_state(self, msg: ValveState) -> None:
+        with self.valve_answer:
+            self.valve_answers[int(msg.step)] = (msg.front_spring, msg.front_damping,
+                                                 msg.rear_spring, msg.rear_damping)
+            self.valve_answer.notify_all()
 
     def publish_telemetry(self, histories: dict[str, np.ndarray], index: int = 0) -> None:
         """Publish the time histories of design ``index`` on the telemetry topics."""

@@ -52,7 +52,7 @@ class ValveControllerParams:
     delay_max_s: float = 0.100
     pressure_low_pa: float = 1.5e6
     pressure_high_pa: float = 4.0e6
-    control_period_s: float = 0.005
+    control_period_s: float = 0.010
 
     def __post_init__(self) -> None:
         """Check the ordering of thresholds and the delay range."""
@@ -198,6 +198,11 @@ class ValveController:
             self._command(step, RIDE_STATE, strut_pressure_pa)
         self._land(step)
         return self.commanded, self.actual
+
+    def update_from_state(self, step: int, state: dict) -> tuple[int, ...]:
+        """Advance one period from a VehicleState-like mapping; return the actual state."""
+        return self.update(step, state['lateral_acceleration_mps2'], state['roll_rate_radps'],
+                           state['steering_rate_radps'], tuple(state['strut_pressure_pa']))[1]
 
     def _command(self, step: int, state: tuple[int, int, int, int],
                  pressure_pa: tuple[float, float, float, float]) -> None:
