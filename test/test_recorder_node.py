@@ -170,6 +170,24 @@ def test_records_topics_service_events_and_action_feedback_and_status(
     events = [decode(contents, m) for m in contents.on('/sim_0/evaluate/_service_event')]
     responses = [e.response[0] for e in events if e.response]
     assert list(responses[0].f) == [0.5, 1.0]  # 2 x designs
+    # and with rosbags, a reader we did not write (bytes as Fast DDS delivered them)
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    typestore = get_typestore(Stores.EMPTY)
+    with Reader(path) as reader:
+        names = {}
+        for connection in reader.connections:
+            types = get_types_from_msg(connection.msgdef.data, connection.msgtype)
+            typestore.register(types)
+            names[connection.topic] = next(iter(types))  # rosbags: pkg/srv/msg/T
+        decoded = 0
+        for connection, _, raw in reader.messages():
+            msgdef = typestore.get_msgdef(names[connection.topic])
+            _, end = msgdef.deserialize_cdr_le(raw[4:], 0, msgdef.cls, typestore)
+            assert 0 <= len(raw) - 4 - end <= 8  # payload ends within the DDS sample
+            decoded += 1
+        assert decoded == contents.message_count
     channels = {c.topic: c for c in contents.channels.values()}
     imu_qos = channels['/sim_0/telemetry/imu'].offered_qos_profiles[0]
     assert imu_qos['reliability'] == 'best_effort'  # the publisher's offer, sensor data
