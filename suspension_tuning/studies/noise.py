@@ -1,0 +1,195 @@
+"""Numerical-noise study of the full and simplified models (paper Figs 7-8).
+
+The front damper variable x1 is swept finely through the centre of the design space (the
+other variables at the centre) for both models, and the noise of each function (f and
+each g) is estimated from the sweep (:func:`noise_measure`: third-difference table, and
+the residual about a polynomial trend).  Values are in full-model units (simplified
+values scaled by eq. 25 when a scaling is given).
+
+Handling: the simplified model runs with the inputs (steering, slip angles) of the full
+model's run at the sweep centre, as all 2n stencil points of one gradient do; the
+variant with each point's own full-run inputs is reported as ``simplified_own_inputs``
+(it inherits the full model's noise through the inputs).
+
+Run ``python -m suspension_tuning.studies.noise --scenario ride --out DIR``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from suspension_tuning.optim.scaling import FUNCTION_NAMES, Scaling
+from suspension_tuning.optim.simplified_gradient import load_or_calibrate, simplified_values
+from suspension_tuning.vehicle.design import X_LOWER, X_UPPER
+from suspension_tuning.vehicle.pitch_plane import load_simplified_config
+from suspension_tuning.vehicle.scenarios import run_scenario
+from suspension_tuning.vehicle.simplified import SimplifiedInputs
+
+Array = NDArray[np.float64]
+CENTRE = 0.5 * (X_LOWER + X_UPPER)
+
+
+def noise_measure(x: Array, values: Array, degree: int = 2, step: float = 0.025) -> dict:
+    """Noise of one swept function (uniform sweep).
+
+    Two estimates of the noise standard deviation sigma:
+
+    * difference table (after Moré & Wild's ECnoise): for independent noise the third
+      differences of equally spaced values have variance 20 sigma^2 (binomial weights
+      1, 3, 3, 1), while a smooth function's third differences are f'''(x) dx^3,
+      negligible on a fine sweep: ``noise_rms = rms(diff3) / sqrt(20)``;
+    * ``residual_rms``: RMS residual about a polynomial trend of ``degree`` (includes any
+      unresolved smooth curvature, so it is an upper bound).
+
+    Parameters
+    ----------
+    x : np.ndarray
+        Uniform sweep positions (k,), k >= max(degree + 2, 5).
+    values : np.ndarray
+        Function values (k,).
+    degree : int
+        Degree of the trend polynomial.
+    step : float
+        Central-difference half step for ``fd_gradient_noise``.
+
+    Returns
+    -------
+    dict
+        'noise_rms', 'residual_rms', 'noise_rel' (noise_rms over the trend's range),
+        'trend_range', 'fd_gradient_noise' (``sqrt(2) noise_rms / (2 h)``, the error
+        such noise puts into a central difference of half step h).  A constant function
+        has zero noise and NaN relative noise.
+    """
+    x = np.asarray(x, float)
+    y = np.asarray(values, float)
+    if x.shape != y.shape or x.ndim != 1 or x.size < max(degree + 2, 5):
+        raise ValueError(f'need matching 1-D x, values with >= {max(degree + 2, 5)} points')
+    if np.ptp(y) <= 1e-12 * max(1.0, float(np.max(np.abs(y)))):
+        return {'noise_rms': 0.0, 'residual_rms': 0.0, 'noise_rel': float('nan'),
+                'trend_range': 0.0, 'fd_gradient_noise': 0.0}  # fmt: skip
+    d3 = np.diff(y, 3)
+    noise = float(np.sqrt(np.mean(d3**2) / 20.0))
+    trend = np.polyval(np.polyfit(x, y, degree), x)
+    rng = float(np.ptp(trend))
+    return {
+        'noise_rms': noise,
+        'residual_rms': float(np.sqrt(np.mean((y - trend) ** 2))),
+        'noise_rel': noise / rng if rng > 0 else float('nan'),
+        'trend_range': rng,
+        'fd_gradient_noise': float(np.sqrt(2.0) * noise / (2.0 * step)),
+    }
+
+
+def sweep_x1(
+    scenario: str,
+    scaling: Scaling | None = None,
+    n_vars: int = 2,
+    n_points: int | None = None,
+    half_width: float | None = None,
+    degree: int | None = None,
+    png: str | Path | None = None,
+) -> dict[str, object]:
+    """Sweep x1 through the centre for both models and measure the noise.
+
+    Returns
+    -------
+    dict
+        'x1' (k,), 'full' (k, 5), 'simplified' (k, 5) and, for handling,
+        'simplified_own_inputs' (k, 5); 'noise' {model: {function: noise_measure}};
+        'noise_ratio' {function: full noise_rms / simplified noise_rms}.
+    """
+    cfg = load_simplified_config()
+    nc = cfg['noise_study']
+    n_points = int(nc['n_points'] if n_points is None else n_points)
+    half_width = float(nc['half_width'] if half_width is None else half_width)
+    degree = int(nc['detrend_degree'] if degree is None else degree)
+    step = float(cfg['gradient']['step'])
+    x1 = np.linspace(CENTRE - half_width, CENTRE + half_width, n_points)
+    x = np.full((n_points, n_vars), CENTRE)
+    x[:, 0] = x1
+    centre = n_points // 2
+    full_res = run_scenario(scenario, x)
+    models = {'full': np.column_stack([full_res.f, full_res.g])}
+    if scenario == 'ride':
+        models['simplified'] = simplified_values('ride', x, n_vars, None, scaling)
+    else:
+        frozen = SimplifiedInputs.from_scenario_result(full_res, centre)
+        models['simplified'] = simplified_values(scenario, x, n_vars, frozen, scaling)
+        models['simplified_own_inputs'] = np.vstack(
+            [
+                simplified_values(
+                    scenario, x[i], n_vars, SimplifiedInputs.from_scenario_result(full_res, i),
+                    scaling,
+                )
+                for i in range(n_points)
+            ]
+        )  # fmt: skip
+    noise = {
+        m: {nm: noise_measure(x1, v[:, i], degree, step) for i, nm in enumerate(FUNCTION_NAMES)}
+        for m, v in models.items()
+    }
+    ratio = {}
+    for nm in FUNCTION_NAMES:
+        a, b = noise['full'][nm]['noise_rms'], noise['simplified'][nm]['noise_rms']
+        ratio[nm] = a / b if b > 0 else (float('inf') if a > 0 else float('nan'))
+    out = {'x1': x1, **models, 'noise': noise, 'noise_ratio': ratio}
+    if png is not None:
+        _plot(png, scenario, x1, models)
+    return out
+
+
+def _plot(png, scenario, x1, models) -> None:
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    fig, axs = plt.subplots(1, 2, figsize=(12, 4.2))
+    styles = {'full': '-o', 'simplified': '-s', 'simplified_own_inputs': ':^'}
+    for m, v in models.items():
+        axs[0].plot(x1, v[:, 0], styles[m], ms=3, label=m)
+        for i, nm in enumerate(FUNCTION_NAMES[1:], start=1):
+            axs[1].plot(x1, v[:, i], styles[m], ms=3, label=f'{m} {nm}')
+    axs[0].set_title(f'{scenario}: objective f vs x1 (Figs 7-8)')
+    axs[1].set_title(f'{scenario}: tyre-hop constraints g vs x1')
+    for ax in axs:
+        ax.set_xlabel('x1 (front damper dpsf, normalised)')
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    Path(png).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=90)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the sweep, print ``name: value`` lines and write the PNG."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--scenario', choices=('ride', 'handling'), default='ride')
+    ap.add_argument('--n-vars', type=int, default=2, choices=(2, 4))
+    ap.add_argument('--out', default='studies_out', help='output directory')
+    ap.add_argument('--unscaled', action='store_true', help='skip the eq. 25 scaling')
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    sc = None
+    if not args.unscaled:
+        sc, _ = load_or_calibrate(
+            out / f'scaling_{args.scenario}_{args.n_vars}.json', args.scenario, args.n_vars
+        )
+    png = out / f'noise_{args.scenario}_{args.n_vars}.png'
+    res = sweep_x1(args.scenario, sc, args.n_vars, png=png)
+    for m, d in res['noise'].items():
+        for nm, v in d.items():
+            for k in ('noise_rms', 'residual_rms', 'noise_rel', 'fd_gradient_noise'):
+                print(f'{args.scenario}_{m}_{nm}_{k}: {v[k]:.3e}')
+    for nm, r in res['noise_ratio'].items():
+        print(f'{args.scenario}_noise_ratio_full_over_simplified_{nm}: {r:.3e}')
+    print(f'{args.scenario}_noise_png: {png}')
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
