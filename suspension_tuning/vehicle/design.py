@@ -38,7 +38,7 @@ VARIABLE_NAMES = {
 """Names of the normalised variables for the 2- and 4-variable problems [P eqs. 5, 7]."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class AxleSettings:
     """Physical 4S4 settings per axle for a batch of designs.
 

@@ -24,6 +24,7 @@ cross-spectrum ``gamma G_d`` (magnitude-squared coherence ``gamma^2``).
 from __future__ import annotations
 
 import dataclasses
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -93,9 +94,9 @@ class RoadSpec:
             'dx_m',
         ):
             v = getattr(self, name)
-            if not isinstance(v, int | float) or not np.isfinite(v) or v <= 0:
+            if not isinstance(v, numbers.Real) or not np.isfinite(v) or v <= 0:
                 raise ValueError(f'RoadSpec.{name} must be a positive finite number, got {v!r}')
-        if not isinstance(self.ramp_in_m, int | float) or not 0 <= self.ramp_in_m < self.length_m:
+        if not isinstance(self.ramp_in_m, numbers.Real) or not 0 <= self.ramp_in_m < self.length_m:
             raise ValueError(f'RoadSpec.ramp_in_m must lie in [0, length_m), got {self.ramp_in_m}')
         if not isinstance(self.seed, int | np.integer) or isinstance(self.seed, bool):
             raise ValueError(f'RoadSpec.seed must be an integer, got {self.seed!r}')
@@ -236,7 +237,7 @@ def _check_side(side: str) -> str:
     return side
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class RoadProfile:
     """Elevation of the left and right wheel tracks on a uniform x grid.
 
@@ -256,14 +257,18 @@ class RoadProfile:
     spec: RoadSpec | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
-        """Check shapes and monotonic x."""
-        x = np.asarray(self.x_m, dtype=float)
+        """Check shapes and monotonic x; store float copies of the arrays."""
+        for name in ('x_m', 'z_left_m', 'z_right_m'):
+            object.__setattr__(self, name, np.array(getattr(self, name), dtype=float))
+        x = self.x_m
         if x.ndim != 1 or x.size < 2:
             raise ValueError('RoadProfile.x_m must be 1-D with at least 2 samples')
         if np.shape(self.z_left_m) != x.shape or np.shape(self.z_right_m) != x.shape:
             raise ValueError('RoadProfile z arrays must have the shape of x_m')
         if not np.all(np.diff(x) > 0):
             raise ValueError('RoadProfile.x_m must be strictly increasing')
+        if not (np.all(np.isfinite(self.z_left_m)) and np.all(np.isfinite(self.z_right_m))):
+            raise ValueError('RoadProfile elevations contain NaN or inf')
 
     @property
     def length_m(self) -> float:
