@@ -181,18 +181,21 @@ def test_same_bits_in_chunks_alone_or_in_a_batch():
 
 def test_kernel_driver_matches_python_preview_driver():
     model, setting, driver, sc, speed = _handling_model(1)
+    n = int(round(9.0 / P.dt_s))  # the whole double lane change (9 s at 65 km/h)
     model.reset(
         setting, fm.ValveState.handling(1), speed, x0_m=-20, driver=driver, speed_controller=sc
     )
-    model.step(6000)
+    model.step(n)
     ref = fm.FullVehicleModel(P)
     ctrl = scenarios.dlc_controller(driver, sc, 1, P.control_period_s)
     ref.reset(setting, fm.ValveState.handling(1), speed, x0_m=-20, controller=ctrl)
-    ref.step(6000)
-    # only difference: the kernel tabulates y_ref every 0.05 m (interpolation error
-    # < 1e-5 m), so trajectories agree to well below a millimetre after 6 s / 108 m
-    assert abs(model.state[0, K.I_Y] - ref.state[0, K.I_Y]) < 1e-4
-    assert abs(model.state[0, K.I_DELTA] - ref.state[0, K.I_DELTA]) < 1e-5
+    ref.step(n)
+    # only difference: the kernel tabulates y_ref, heading_ref and curvature_ref every
+    # 0.05 m; the C1 path's curvature jumps at the transition ends and the table ramps
+    # across one cell there, so the runs differ by well under 1 mm / 0.1 mrad
+    assert abs(model.state[0, K.I_Y] - ref.state[0, K.I_Y]) < 1e-3
+    assert abs(model.state[0, K.I_DELTA] - ref.state[0, K.I_DELTA]) < 1e-4
+    assert abs(model.state[0, K.I_U] - ref.state[0, K.I_U]) < 1e-3
 
 
 def test_valve_switch_keeps_force_continuous_and_round_trip_restores_gas():

@@ -129,6 +129,8 @@ N_WORK = 50
 (
     C_STEER_ON,
     C_SPEED_ON,
+    C_KLAT,
+    C_TFF,
     C_TP,
     C_LPMIN,
     C_KFF,
@@ -144,8 +146,8 @@ N_WORK = 50
     C_TAB_DX,
     C_TC,
     C_SPC,
-) = range(17)
-N_CTRL = 17
+) = range(19)
+N_CTRL = 19
 
 
 @njit(cache=True, inline='always', fastmath=True)
@@ -483,14 +485,24 @@ def controller(s, uin, cstate, C, ytab):
     """Preview steering driver and PI speed controller (zero-order hold update)."""
     u = s[I_U]
     if C[C_STEER_ON] > 0.0:
+        # manoeuvre.PreviewDriver.steer: preview error + curvature feed-forward + yaw rate
         lp = C[C_TP] * abs(u)
         if lp < C[C_LPMIN]:
             lp = C[C_LPMIN]
-        xt = s[I_X] + lp
-        dyw = y_table(xt, ytab, C[C_TAB_X0], C[C_TAB_DX]) - s[I_Y]
-        e = -math.sin(s[I_PSI]) * lp + math.cos(s[I_PSI]) * dyw
-        kappa = 2.0 * e / (lp * lp + dyw * dyw)
-        delta = C[C_KFF] * (C[C_WB] + C[C_KUS] * u * u) * kappa + C[C_KR] * (u * kappa - s[I_R])
+        x = s[I_X]
+        x0 = C[C_TAB_X0]
+        dx = C[C_TAB_DX]
+        e = (
+            y_table(x, ytab[0], x0, dx)
+            - s[I_Y]
+            + lp * math.sin(y_table(x, ytab[1], x0, dx) - s[I_PSI])
+        )
+        kappa = y_table(x + u * C[C_TFF], ytab[2], x0, dx)
+        delta = (
+            C[C_KFF] * (C[C_WB] + C[C_KUS] * u * u) * kappa
+            + C[C_KLAT] * e
+            + C[C_KR] * (u * kappa - s[I_R])
+        )
         if delta > C[C_DMAX]:
             delta = C[C_DMAX]
         elif delta < -C[C_DMAX]:

@@ -622,11 +622,12 @@ class FullVehicleModel:
         c = np.zeros(K.N_CTRL)
         c[K.C_SPC] = self.steps_per_control
         c[K.C_TC] = self.steps_per_control * self.dt_s
-        self._ytab = np.zeros(2)
+        self._ytab = np.zeros((3, 2))
         self._cstates = np.zeros((batch, 1))
         if driver is not None:
             c[K.C_STEER_ON] = 1.0
             c[K.C_TP], c[K.C_LPMIN] = driver.preview_time_s, driver.preview_min_m
+            c[K.C_KLAT], c[K.C_TFF] = driver.lateral_gain_rad_per_m, driver.feedforward_time_s
             c[K.C_KFF] = driver.k_feedforward
             c[K.C_KUS] = driver.understeer_gradient_rad_per_mps2
             c[K.C_KR], c[K.C_DMAX] = driver.yaw_rate_gain_s, driver.max_steer_rad
@@ -635,7 +636,10 @@ class FullVehicleModel:
             x_hi = driver.track.x_end_m + 1.0
             n = int(np.ceil((x_hi - x_lo) / PATH_TABLE_DX_M)) + 1
             xs = x_lo + PATH_TABLE_DX_M * np.arange(n)
-            self._ytab = np.ascontiguousarray(driver.track.y_ref(xs), dtype=float)
+            tr = driver.track
+            self._ytab = np.ascontiguousarray(
+                np.stack([tr.y_ref(xs), tr.heading_ref(xs), tr.curvature_ref(xs)]), dtype=float
+            )
             c[K.C_TAB_X0], c[K.C_TAB_DX] = x_lo, PATH_TABLE_DX_M
         if speed_controller is not None:
             c[K.C_SPEED_ON] = 1.0
