@@ -236,3 +236,31 @@ def test_bad_inputs_raise_value_error():
     model.reset(fm.SuspensionSetting.baseline(P, 1), fm.ValveState.ride(1), SPEED)
     with pytest.raises(ValueError, match='n_steps'):
         model.step(-1)
+
+
+def test_discrete_bump_reaches_rear_axle_one_wheelbase_later_and_settles():
+    speed = 20 / 3.6  # [m/s] a slow bump crossing (paper section 4.1 validates on bumps)
+    x_bump = 10.0
+    prof = road.discrete_bump(0.08, 0.6, x_bump, 60.0)  # 80 mm x 0.6 m half-sine, both sides
+    model = fm.FullVehicleModel(P, prof)
+    model.reset(
+        fm.SuspensionSetting.baseline(P, 1), fm.ValveState.ride(1), speed, x0_m=P.b_m + 1.0
+    )
+    rec = model.simulate(7.0)
+    h = fm.outputs_from_channels(rec.full, rec.hist)
+    t = rec.t_full_s
+    fz = h['tyre_fz_n'][0]
+    t_front = t[np.argmax(fz[0])]
+    t_rear = t[np.argmax(fz[2])]
+    # the rear wheels meet the bump one wheelbase later: 2.794 m / 5.556 m/s = 0.503 s
+    assert t_rear - t_front == pytest.approx(P.wheelbase_m / speed, abs=0.03)
+    # the front wheel meets the bump when x_front + the bump's rising flank is reached:
+    # (10 - (b + 1 + a) + 0.3) / 5.556 = 0.72 s; peak load within the 0.6 m bump passage
+    t_expected = (x_bump - (P.b_m + 1.0 + P.a_m) + 0.3) / speed
+    assert abs(t_front - t_expected) < 0.6 / speed
+    # left and right identical (symmetric bump): no roll
+    np.testing.assert_allclose(fz[0], fz[1], rtol=1e-9)
+    assert np.max(np.abs(h['roll_rad'])) < 1e-9
+    # and the body returns to the static ride height (< 1 mm) within 5 s of the bump
+    heave = h['heave_m'][0]
+    assert np.max(np.abs(heave[rec.t_hist_s > 6.0])) < 1e-3

@@ -145,7 +145,7 @@ def run_scenario(
     cfg = config if config is not None else load_scenarios_config()
     xv, setting = _settings(name, x, n_vars, params)
     if name == 'ride':
-        return _run_ride(xv, setting, params, cfg['ride'])
+        return _run_ride(xv, setting, params, cfg['ride'], cfg['handling']['speed_controller'])
     return _run_handling(xv, setting, params, cfg['handling'])
 
 
@@ -160,7 +160,7 @@ def _histories(rec: SimulationRecord) -> dict[str, np.ndarray]:
 
 
 def _run_ride(
-    x: np.ndarray, setting: SuspensionSetting, params: VehicleParams, cfg: dict
+    x: np.ndarray, setting: SuspensionSetting, params: VehicleParams, cfg: dict, sc_cfg: dict
 ) -> ScenarioResult:
     road, road_len = _ride_road(ride_road_spec(cfg), params.tyre.contact_length_m)
     speed = float(cfg['speed_kmh']) / 3.6
@@ -172,8 +172,7 @@ def _run_ride(
             f'ride run ({speed * duration:.0f} m) is longer than the road ({road_len:.0f} m)'
         )
     batch = x.shape[0]
-    hcfg = load_scenarios_config()['handling']['speed_controller']
-    sc = manoeuvre.SpeedController.from_yaml_dict(hcfg, speed)
+    sc = manoeuvre.SpeedController.from_yaml_dict(sc_cfg, speed)
     model = FullVehicleModel(params, road)
     model.reset(setting, ValveState.ride(batch), speed, x0_m=x0, speed_controller=sc)
     rec = model.simulate(duration)
