@@ -1,0 +1,455 @@
+"""``inspect_bag``: what a recorded run holds, and where to resume it.
+
+``inspect_bag <bag> [--plots DIR] [--json]`` prints:
+
+* the bag: file, complete or truncated (and why), topics with types and message
+  counts, start time and duration;
+* the run's configuration (the ``run_config`` metadata record);
+* the optimisation, if ``/optimisation/progress`` (IterationRecord) and/or
+  ``/optimisation/result`` (Optimise_Result) are present: the iteration table
+  (iteration, f, largest violation, move limit, full and simplified runs, x), the
+  optimum (x, f, g, physical values), the evaluation counts, and the requests seen on
+  the service-event topics;
+* valve switching events from ``/suspension/valve_command`` and
+  ``/suspension/valve_state``: the simulated time of each change of the commanded
+  state and the delay until the actual state reached it (paper section 3: 50-100 ms).
+
+``--plots DIR`` writes PNG files: ``convergence.png`` (f and the largest violation vs
+iteration), ``design.png`` (each x component vs iteration, and the x1-x2 plane),
+``telemetry.png`` (the last run's ``/<sim>/telemetry/*`` streams vs simulated time).
+
+:func:`last_iteration` returns what :class:`suspension_tuning.optim.dynamic_q.DynamicQ`
+needs to resume the optimisation (``history=``).  Everything here is plain Python
+(messages are decoded with the definitions stored in the bag), no rclpy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from suspension_tuning.bag.reader import BagContents, decode, read_messages
+
+PROGRESS_TOPIC = '/optimisation/progress'
+RESULT_TOPIC = '/optimisation/result'
+RUN_CONFIG_TOPIC = '/optimisation/run_config'
+FEEDBACK_SUFFIX = '/_action/feedback'
+VALVE_COMMAND_TOPIC = '/suspension/valve_command'
+VALVE_STATE_TOPIC = '/suspension/valve_state'
+#: ServiceEventInfo.event_type of a request as the server received it (service_msgs).
+REQUEST_RECEIVED = 1
+VALVE_FIELDS = ('front_spring', 'front_damping', 'rear_spring', 'rear_damping')
+
+
+def _record(msg: Any) -> dict[str, Any]:
+    """An IterationRecord as a plain dict (lists of floats, ints)."""
+    return {
+        'iteration': int(msg.iteration),
+        'x': [float(v) for v in msg.x],
+        'f': float(msg.f),
+        'g': [float(v) for v in msg.g],
+        'move_limit': float(msg.move_limit),
+        'max_violation': float(msg.max_violation),
+        'n_full_runs': int(msg.n_full_runs),
+        'n_simplified_runs': int(msg.n_simplified_runs),
+        'wall_time_s': float(msg.wall_time_s),
+    }
+
+
+def _stamp_s(header: Any) -> float:
+    return header.stamp.sec + header.stamp.nanosec * 1e-9
+
+
+def iterations(contents: BagContents) -> list[dict[str, Any]]:
+    """The iteration records of the (last) run in the bag.
+
+    From ``/optimisation/progress``; if the bag has none, from the action feedback,
+    else from the result's history.  A record whose iteration number does not grow
+    starts a new run: only the last run is returned.
+    """
+    messages = contents.on(PROGRESS_TOPIC)
+    if messages:
+        records = [_record(decode(contents, m)) for m in messages]
+    else:
+        feedback = [t for t in contents.topics() if t.endswith(FEEDBACK_SUFFIX)]
+        if feedback:
+            records = [
+                _record(decode(contents, m).feedback.latest) for m in contents.on(feedback[0])
+            ]
+        else:
+            result = optimum(contents)
+            records = result['history'] if result else []
+    start = 0
+    for k in range(1, len(records)):
+        if records[k]['iteration'] <= records[k - 1]['iteration']:
+            start = k
+    return records[start:]
+
+
+def optimum(contents: BagContents) -> dict[str, Any] | None:
+    """The last ``/optimisation/result`` as a dict (None if the bag has none)."""
+    messages = contents.on(RESULT_TOPIC)
+    if not messages:
+        return None
+    msg = decode(contents, messages[-1])
+    return {
+        'success': bool(msg.success),
+        'message': str(msg.message),
+        'x': [float(v) for v in msg.x],
+        'f': float(msg.f),
+        'g': [float(v) for v in msg.g],
+        'physical': dict(
+            zip([str(n) for n in msg.physical_names], [float(v) for v in msg.physical_values])
+        ),
+        'iterations': int(msg.iterations),
+        'n_full_runs': int(msg.n_full_runs),
+        'n_simplified_runs': int(msg.n_simplified_runs),
+        'n_calibration_runs': int(msg.n_calibration_runs),
+        'history': [_record(r) for r in msg.history],
+        'wall_time_s': float(msg.wall_time_s),
+    }
+
+
+def service_requests(contents: BagContents) -> dict[str, dict[str, int]]:
+    """Per service-event topic: requests received by the server and designs in them."""
+    out: dict[str, dict[str, int]] = {}
+    for topic in contents.topics():
+        if not topic.endswith('/_service_event'):
+            continue
+        requests = designs = 0
+        for message in contents.on(topic):
+            event = decode(contents, message)
+            if event.info.event_type != REQUEST_RECEIVED or not event.request:
+                continue
+            requests += 1
+            request = event.request[0]
+            if hasattr(request, 'designs') and hasattr(request, 'n_vars') and request.n_vars:
+                designs += len(request.designs) // int(request.n_vars)
+            else:
+                designs += 1
+        out[topic[: -len('/_service_event')]] = {'requests': requests, 'designs': designs}
+    return out
+
+
+def valve_events(contents: BagContents) -> list[dict[str, Any]]:
+    """Changes of the commanded valve state and when the actual state followed.
+
+    Returns
+    -------
+    list of dict
+        ``time_s`` (simulated time of the command, header.stamp), ``step``, ``state``
+        (front_spring, front_damping, rear_spring, rear_damping), ``actual_time_s``
+        and ``delay_s`` (None if the actual state never reached it in the bag).
+    """
+
+    def changes(topic: str) -> list[tuple[float, int, tuple[int, ...]]]:
+        out, last = [], None
+        for message in contents.on(topic):
+            msg = decode(contents, message)
+            state = tuple(int(getattr(msg, f)) for f in VALVE_FIELDS)
+            if state != last:
+                out.append((_stamp_s(msg.header), int(msg.step), state))
+                last = state
+        return out
+
+    commands = changes(VALVE_COMMAND_TOPIC)[1:]  # the first message is the initial state
+    actual = changes(VALVE_STATE_TOPIC)
+    events = []
+    for time_s, step, state in commands:
+        reached = next(((t, s) for t, s, st in actual if st == state and t >= time_s), None)
+        events.append(
+            {
+                'time_s': time_s,
+                'step': step,
+                'state': list(state),
+                'actual_time_s': reached[0] if reached else None,
+                'delay_s': reached[0] - time_s if reached else None,
+            }
+        )
+    return events
+
+
+def summary(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Everything ``inspect_bag`` reports, as a JSON-ready dict."""
+    contents = read_messages(path)
+    counts = contents.counts()
+    info: dict[str, Any] = {
+        'bag': str(path),
+        'complete': contents.complete,
+        'stop_reason': contents.stop_reason,
+        'message_count': contents.message_count,
+        'start_ns': contents.start_ns,
+        'duration_s': contents.duration_ns / 1e9,
+        'topics': {
+            t: {'type': ty, 'count': counts[t]} for t, ty in sorted(contents.topics().items())
+        },
+        'run_config': None,
+    }
+    if 'run_config' in contents.metadata:
+        text = contents.metadata['run_config'].get('yaml', '')
+        info['run_config'] = (
+            yaml.safe_load(text) if text else dict(contents.metadata['run_config'])
+        )
+    records = iterations(contents)
+    result = optimum(contents)
+    if records or result:
+        info['iterations'] = records
+        info['optimum'] = {k: v for k, v in result.items() if k != 'history'} if result else None
+        last = records[-1] if records else {}
+        info['evaluations'] = {
+            'n_full_runs': result['n_full_runs'] if result else last.get('n_full_runs'),
+            'n_simplified_runs': (
+                result['n_simplified_runs'] if result else last.get('n_simplified_runs')
+            ),
+            'n_calibration_runs': result['n_calibration_runs'] if result else None,
+            'iterations': result['iterations'] if result else len(records),
+            'services': service_requests(contents),
+        }
+    if contents.on(VALVE_COMMAND_TOPIC):
+        info['valve_events'] = valve_events(contents)
+    return info
+
+
+def last_iteration(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """What the optimiser needs to resume the bag's run from its last iteration.
+
+    Returns
+    -------
+    dict
+        ``history``: records in the form :class:`~suspension_tuning.optim.dynamic_q.DynamicQ`
+        accepts (``x``, ``f``, ``g``, ``h`` = [], ``accepted``, ``from_iteration``,
+        ``max_violation``, ``rho_next`` = the recorded move limit on every record);
+        ``x``: the last iterate; ``iteration``; ``run_config`` (dict or None);
+        ``scenario`` and ``n_vars`` from it when present.
+
+    Raises
+    ------
+    ValueError
+        If the bag holds no iteration records.
+    """
+    contents = read_messages(path)
+    records = iterations(contents)
+    if not records:
+        raise ValueError(
+            f'{path}: no iteration records (no /optimisation/progress, feedback '
+            'or result) to resume from'
+        )
+    history = []
+    for k, rec in enumerate(records):
+        history.append(
+            {
+                'iteration': rec['iteration'],
+                'x': np.asarray(rec['x'], dtype=float),
+                'f': rec['f'],
+                'g': np.asarray(rec['g'], dtype=float),
+                'h': np.zeros(0),
+                'max_violation': rec['max_violation'],
+                'accepted': True,
+                'from_iteration': k - 1,
+                'rho_next': rec['move_limit'],
+                'n_full_runs': rec['n_full_runs'],
+                'n_simplified_runs': rec['n_simplified_runs'],
+            }
+        )
+    config = None
+    if 'run_config' in contents.metadata:
+        text = contents.metadata['run_config'].get('yaml', '')
+        config = yaml.safe_load(text) if text else None
+    out = {
+        'history': history,
+        'x': history[-1]['x'].copy(),
+        'iteration': history[-1]['iteration'],
+        'run_config': config,
+    }
+    if isinstance(config, dict):
+        out['scenario'] = config.get('scenario')
+        out['n_vars'] = config.get('n_vars')
+    return out
+
+
+# ---------------------------------------------------------------------- plots
+def _last_run(samples: list[tuple[float, Any]]) -> list[tuple[float, Any]]:
+    """The samples after the last time the simulated time went backwards (a new run)."""
+    start = 0
+    for k in range(1, len(samples)):
+        if samples[k][0] < samples[k - 1][0]:
+            start = k
+    return samples[start:]
+
+
+def write_plots(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]) -> list[Path]:
+    """Write convergence.png, design.png and telemetry.png (those the bag has data for)."""
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    contents = read_messages(path)
+    records = iterations(contents)
+    written = []
+    if records:
+        k = [r['iteration'] for r in records]
+        fig, (ax_f, ax_g) = plt.subplots(2, 1, sharex=True, figsize=(6, 5))
+        ax_f.plot(k, [r['f'] for r in records], 'o-')
+        ax_f.set_ylabel('objective f')
+        ax_g.plot(k, [r['max_violation'] for r in records], 's-', color='tab:red')
+        ax_g.set_ylabel('largest violation max(0, g)')
+        ax_g.set_xlabel('iteration')
+        fig.suptitle('Dynamic-Q convergence')
+        fig.tight_layout()
+        fig.savefig(out / 'convergence.png', dpi=100)
+        plt.close(fig)
+        written.append(out / 'convergence.png')
+        x = np.array([r['x'] for r in records], dtype=float)
+        fig, (ax_k, ax_p) = plt.subplots(1, 2, figsize=(10, 4))
+        for j in range(x.shape[1]):
+            ax_k.plot(k, x[:, j], 'o-', label=f'x{j + 1}')
+        ax_k.set_xlabel('iteration')
+        ax_k.set_ylabel('normalised design variable')
+        ax_k.legend()
+        if x.shape[1] >= 2:
+            ax_p.plot(x[:, 0], x[:, 1], 'o-')
+            ax_p.plot(x[-1, 0], x[-1, 1], '*', markersize=14, color='tab:green', label='last')
+            ax_p.set_xlabel('x1')
+            ax_p.set_ylabel('x2')
+            ax_p.set_xlim(0, 1)
+            ax_p.set_ylim(0, 1)
+            ax_p.legend()
+        fig.tight_layout()
+        fig.savefig(out / 'design.png', dpi=100)
+        plt.close(fig)
+        written.append(out / 'design.png')
+    telemetry = sorted(t for t in contents.topics() if '/telemetry/' in t)
+    if telemetry:
+        fig, axes = plt.subplots(
+            len(telemetry), 1, sharex=True, figsize=(8, 2.2 * len(telemetry)), squeeze=False
+        )
+        for ax, topic in zip(axes[:, 0], telemetry):
+            samples = [
+                (lambda m: (_stamp_s(m.header), m))(decode(contents, msg))
+                for msg in contents.on(topic)
+            ]
+            samples = _last_run(samples)
+            t = [s[0] for s in samples]
+            first = samples[0][1] if samples else None
+            if first is not None and hasattr(first, 'linear_acceleration'):
+                for axis in 'xyz':
+                    ax.plot(
+                        t,
+                        [getattr(s[1].linear_acceleration, axis) for s in samples],
+                        label=f'a_{axis} m/s^2',
+                    )
+                roll = [
+                    math.degrees(
+                        math.atan2(2 * (q.w * q.x + q.y * q.z), 1 - 2 * (q.x * q.x + q.y * q.y))
+                    )
+                    for q in (s[1].orientation for s in samples)
+                ]
+                ax.plot(t, roll, label='roll deg')
+            elif first is not None and hasattr(first, 'name'):
+                field = 'effort' if any(len(s[1].effort) for s in samples) else 'position'
+                for j, name in enumerate(first.name):
+                    ax.plot(
+                        t,
+                        [
+                            getattr(s[1], field)[j]
+                            if len(getattr(s[1], field)) > j
+                            else float('nan')
+                            for s in samples
+                        ],
+                        label=f'{name} {field}',
+                    )
+            ax.set_title(topic, fontsize=9)
+            ax.legend(fontsize=7, loc='upper right')
+        axes[-1, 0].set_xlabel('simulated time, s')
+        fig.tight_layout()
+        fig.savefig(out / 'telemetry.png', dpi=100)
+        plt.close(fig)
+        written.append(out / 'telemetry.png')
+    return written
+
+
+# ------------------------------------------------------------------------ CLI
+def _format(info: dict[str, Any]) -> str:
+    lines = [
+        f'bag: {info["bag"]}  ({"complete" if info["complete"] else "TRUNCATED: "}'
+        f'{info["stop_reason"]})',
+        f'messages: {info["message_count"]}, duration {info["duration_s"]:.3f} s',
+        'topics:',
+    ]
+    width = max((len(t) for t in info['topics']), default=10)
+    for topic, t in info['topics'].items():
+        lines.append(f'  {topic:<{width}}  {t["count"]:>7}  {t["type"]}')
+    if info.get('run_config'):
+        lines.append('run configuration:')
+        lines += ['  ' + line for line in yaml.safe_dump(info['run_config']).splitlines()]
+    if 'iterations' in info:
+        lines.append('iterations:')
+        lines.append(
+            f'  {"it":>3} {"f":>14} {"max viol":>11} {"move lim":>9} {"full":>5} {"simpl":>6}  x'
+        )
+        for r in info['iterations']:
+            x = ' '.join(f'{v:.6f}' for v in r['x'])
+            lines.append(
+                f'  {r["iteration"]:>3} {r["f"]:>14.8g} {r["max_violation"]:>11.4g} '
+                f'{r["move_limit"]:>9.4g} {r["n_full_runs"]:>5} '
+                f'{r["n_simplified_runs"]:>6}  [{x}]'
+            )
+        best = info.get('optimum')
+        if best:
+            lines.append(
+                f'optimum ({"success" if best["success"] else "FAILED"}: {best["message"]}):'
+            )
+            lines.append(f'  x = {best["x"]}')
+            lines.append(f'  f = {best["f"]!r}')
+            lines.append(f'  g = {best["g"]}')
+            for name, value in best['physical'].items():
+                lines.append(f'  {name} = {value:g}')
+        ev = info['evaluations']
+        lines.append(
+            f'evaluations: iterations {ev["iterations"]}, full-model runs '
+            f'{ev["n_full_runs"]}, simplified-model runs {ev["n_simplified_runs"]}, '
+            f'calibration runs {ev["n_calibration_runs"]}'
+        )
+        for service, n in ev['services'].items():
+            lines.append(f'  {service}: {n["requests"]} requests, {n["designs"]} designs')
+    if info.get('valve_events'):
+        lines.append('valve switching (commanded -> actual, simulated time):')
+        for e in info['valve_events']:
+            delay = 'never' if e['delay_s'] is None else f'{e["delay_s"] * 1e3:.1f} ms'
+            lines.append(f'  t = {e["time_s"]:.3f} s step {e["step"]}: {e["state"]} delay {delay}')
+    return '\n'.join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``inspect_bag``."""
+    parser = argparse.ArgumentParser(prog='inspect_bag', description=__doc__.split('\n')[0])
+    parser.add_argument('bag', help='bag folder or .mcap file')
+    parser.add_argument('--plots', metavar='DIR', help='write PNG plots into DIR')
+    parser.add_argument('--json', action='store_true', help='print JSON instead of text')
+    args = parser.parse_args(argv)
+    try:
+        info = summary(args.bag)
+    except ValueError as exc:
+        print(f'inspect_bag: {exc}', file=sys.stderr)
+        return 2
+    print(json.dumps(info, indent=1) if args.json else _format(info))
+    if args.plots:
+        for path in write_plots(args.bag, args.plots):
+            print(f'plot: {path}', file=sys.stderr)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,262 @@
+"""inspect_bag: the numbers it reports are the ones in the bag's messages, exactly."""
+
+import json
+
+import numpy as np
+import pytest
+
+T0 = 1_700_000_000_000_000_000  # log time of the first message, ns
+
+#: Four Dynamic-Q iterations of a 2-variable run; numbers chosen to be exact in binary
+#: except the last f, which checks that no rounding happens on the way.
+RECORDS = [
+    dict(
+        iteration=0,
+        x=[0.5, 0.5],
+        f=2.0,
+        g=[0.25, -1.0],
+        move_limit=0.25,
+        max_violation=0.25,
+        n_full_runs=1,
+        n_simplified_runs=4,
+        wall_time_s=1.5,
+    ),
+    dict(
+        iteration=1,
+        x=[0.25, 0.75],
+        f=1.5,
+        g=[0.0625, -1.0],
+        move_limit=0.25,
+        max_violation=0.0625,
+        n_full_runs=2,
+        n_simplified_runs=8,
+        wall_time_s=3.0,
+    ),
+    dict(
+        iteration=2,
+        x=[0.125, 0.875],
+        f=1.25,
+        g=[-0.5, -1.0],
+        move_limit=0.125,
+        max_violation=0.0,
+        n_full_runs=3,
+        n_simplified_runs=12,
+        wall_time_s=4.5,
+    ),
+    dict(
+        iteration=3,
+        x=[0.1, 0.9],
+        f=1.2345678901234567,
+        g=[-0.75, -1.0],
+        move_limit=0.0625,
+        max_violation=0.0,
+        n_full_runs=4,
+        n_simplified_runs=16,
+        wall_time_s=6.0,
+    ),
+]
+PHYSICAL = {'dpsf': 0.3997, 'gas_volume_l': 0.55}  # x -> physical, eqs. 4-6 (not checked here)
+
+
+def build_bag(path):
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import Imu, JointState
+    from std_msgs.msg import String
+    from suspension_tuning_interfaces.action import Optimise
+    from suspension_tuning_interfaces.msg import IterationRecord, ValveState
+    from suspension_tuning_interfaces.srv import EvaluateDesign
+
+    from suspension_tuning.bag.writer import BagWriter
+
+    t = T0
+    with BagWriter(path) as bag:
+
+        def put(topic, type_name, msg):
+            nonlocal t
+            bag.add_topic(topic, type_name)
+            bag.write(topic, serialize_message(msg), t)
+            t += 1_000_000
+
+        bag.add_metadata('run_config', {'yaml': 'scenario: ride\nn_vars: 2\n'})
+        put(
+            '/optimisation/run_config',
+            'std_msgs/msg/String',
+            String(data='scenario: ride\nn_vars: 2\n'),
+        )
+        for n_designs in (1, 3):  # two requests: 1 design, then 3 (2 variables each)
+            event = EvaluateDesign.Event()
+            event.info.event_type = 1  # REQUEST_RECEIVED
+            event.request = [
+                EvaluateDesign.Request(scenario='ride', n_vars=2, designs=[0.5] * (2 * n_designs))
+            ]
+            put(
+                '/sim_0/evaluate/_service_event',
+                'suspension_tuning_interfaces/srv/EvaluateDesign_Event',
+                event,
+            )
+            event.info.event_type = 2  # RESPONSE_SENT: not counted as a request
+            event.request = []
+            put(
+                '/sim_0/evaluate/_service_event',
+                'suspension_tuning_interfaces/srv/EvaluateDesign_Event',
+                event,
+            )
+        for rec in RECORDS:
+            put(
+                '/optimisation/progress',
+                'suspension_tuning_interfaces/msg/IterationRecord',
+                IterationRecord(**rec),
+            )
+        # valve: ride state until step 20 (0.100 s at 5 ms), handling commanded at step 20,
+        # actual after 10 steps = 50 ms (paper section 3: 50-100 ms)
+        for step in range(40):
+            commanded = (1, 1, 1, 1) if step >= 20 else (0, 0, 0, 0)
+            actual = (1, 1, 1, 1) if step >= 30 else (0, 0, 0, 0)
+            for topic, state in (
+                ('/suspension/valve_command', commanded),
+                ('/suspension/valve_state', actual),
+            ):
+                msg = ValveState(step=step)
+                msg.header.stamp.sec, msg.header.stamp.nanosec = 0, step * 5_000_000
+                (msg.front_spring, msg.front_damping, msg.rear_spring, msg.rear_damping) = state
+                put(topic, 'suspension_tuning_interfaces/msg/ValveState', msg)
+        # telemetry of two runs; the simulated time restarts for the second (final) one
+        for run in range(2):
+            for k in range(50):
+                seats = JointState(
+                    name=['driver', 'passenger'], effort=[np.sin(k / 5.0) + run, np.cos(k / 5.0)]
+                )
+                seats.header.stamp.nanosec = k * 10_000_000
+                put('/sim_0/telemetry/seats', 'sensor_msgs/msg/JointState', seats)
+                imu = Imu()
+                imu.header.stamp.nanosec = k * 10_000_000
+                imu.linear_acceleration.z = 9.81
+                put('/sim_0/telemetry/imu', 'sensor_msgs/msg/Imu', imu)
+        result = Optimise.Result(
+            success=True,
+            message='converged',
+            x=RECORDS[-1]['x'],
+            f=RECORDS[-1]['f'],
+            g=RECORDS[-1]['g'],
+            physical_names=list(PHYSICAL),
+            physical_values=list(PHYSICAL.values()),
+            iterations=3,
+            n_full_runs=4,
+            n_simplified_runs=16,
+            n_calibration_runs=30,
+            history=[IterationRecord(**r) for r in RECORDS],
+            wall_time_s=6.5,
+        )
+        put('/optimisation/result', 'suspension_tuning_interfaces/action/Optimise_Result', result)
+    return path
+
+
+@pytest.fixture(scope='module')
+def bag(tmp_path_factory):
+    return build_bag(tmp_path_factory.mktemp('inspect') / 'run')
+
+
+def test_summary_reports_topics_counts_and_duration(bag):
+    from suspension_tuning.inspect_bag import summary
+
+    info = summary(bag)
+    assert info['complete']
+    counts = {t: v['count'] for t, v in info['topics'].items()}
+    # 1 run_config + 4 events + 4 progress + 2 x 40 valve + 2 x 2 x 50 telemetry + 1 result
+    assert counts == {
+        '/optimisation/run_config': 1,
+        '/sim_0/evaluate/_service_event': 4,
+        '/optimisation/progress': 4,
+        '/suspension/valve_command': 40,
+        '/suspension/valve_state': 40,
+        '/sim_0/telemetry/seats': 100,
+        '/sim_0/telemetry/imu': 100,
+        '/optimisation/result': 1,
+    }
+    assert info['message_count'] == 290
+    assert info['duration_s'] == pytest.approx(0.289)  # 289 gaps of 1 ms
+    assert info['run_config'] == {'scenario': 'ride', 'n_vars': 2}
+
+
+def test_iteration_table_and_optimum_equal_the_messages_exactly(bag):
+    from suspension_tuning.inspect_bag import summary
+
+    info = summary(bag)
+    for got, want in zip(info['iterations'], RECORDS):
+        assert got == want  # every field, floats compared exactly
+    assert len(info['iterations']) == 4
+    best = info['optimum']
+    assert best['x'] == RECORDS[-1]['x'] and best['f'] == RECORDS[-1]['f']
+    assert best['g'] == RECORDS[-1]['g']
+    assert best['physical'] == PHYSICAL
+    assert best['success'] and best['message'] == 'converged'
+    ev = info['evaluations']
+    assert (
+        ev['iterations'],
+        ev['n_full_runs'],
+        ev['n_simplified_runs'],
+        ev['n_calibration_runs'],
+    ) == (3, 4, 16, 30)
+    # 2 requests received, with 1 and 3 designs
+    assert ev['services'] == {'/sim_0/evaluate': {'requests': 2, 'designs': 4}}
+
+
+def test_valve_switching_event_and_its_delay(bag):
+    from suspension_tuning.inspect_bag import summary
+
+    events = summary(bag)['valve_events']
+    assert len(events) == 1
+    event = events[0]
+    assert event['step'] == 20 and event['state'] == [1, 1, 1, 1]
+    assert event['time_s'] == pytest.approx(0.100)  # step 20 x 5 ms
+    assert event['delay_s'] == pytest.approx(0.050)  # 10 steps x 5 ms
+
+
+def test_cli_prints_table_json_and_writes_plots(bag, tmp_path, capsys):
+    from suspension_tuning.inspect_bag import main
+
+    assert main([str(bag), '--plots', str(tmp_path / 'plots')]) == 0
+    text = capsys.readouterr().out
+    assert '/optimisation/progress' in text and 'converged' in text
+    assert 'f = 1.2345678901234567' in text
+    assert 'delay 50.0 ms' in text
+    for name in ('convergence.png', 'design.png', 'telemetry.png'):
+        data = (tmp_path / 'plots' / name).read_bytes()
+        assert data[:8] == b'\x89PNG\r\n\x1a\n' and len(data) > 5000
+    assert main([str(bag), '--json']) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info['optimum']['f'] == RECORDS[-1]['f']
+    assert main([str(tmp_path / 'missing')]) == 2
+
+
+def test_last_iteration_resumes_dynamic_q_at_the_last_record(bag):
+    from suspension_tuning.inspect_bag import last_iteration
+    from suspension_tuning.optim.dynamic_q import DynamicQ
+
+    state = last_iteration(bag)
+    assert state['iteration'] == 3 and state['scenario'] == 'ride' and state['n_vars'] == 2
+    assert list(state['x']) == RECORDS[-1]['x']
+    assert [h['f'] for h in state['history']] == [r['f'] for r in RECORDS]
+    assert state['history'][-1]['rho_next'] == RECORDS[-1]['move_limit']
+    optimiser = DynamicQ(
+        state['history'][0]['x'], [0.001, 0.001], [1.0, 1.0], history=state['history']
+    )
+    kind, x = optimiser.ask()
+    # the last record has no gradient yet: Dynamic-Q continues with the gradient there
+    assert kind == 'gradient'
+    assert list(x) == RECORDS[-1]['x']
+    assert len(optimiser.history) == 4
+
+
+def test_last_iteration_without_records_raises(tmp_path):
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from suspension_tuning.bag.writer import BagWriter
+    from suspension_tuning.inspect_bag import last_iteration
+
+    with BagWriter(tmp_path / 'empty') as writer:
+        writer.add_topic('/chatter', 'std_msgs/msg/String')
+        writer.write('/chatter', serialize_message(String(data='hi')), T0)
+    with pytest.raises(ValueError, match='no iteration records'):
+        last_iteration(tmp_path / 'empty')
