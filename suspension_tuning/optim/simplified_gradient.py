@@ -70,6 +70,51 @@ def simplified_values(
     return scaling.apply(vals) if scaling is not None else vals
 
 
+def calibration_designs(
+    n_vars: int, n_samples: int | None = None, seed: int | None = None
+) -> tuple[Array, int, int]:
+    """Sample designs of the eq. 25 calibration (config/simplified_models.yaml scaling).
+
+    Returns
+    -------
+    (x (N, n_vars), N, seed)
+    """
+    cfg = load_simplified_config()['scaling']
+    n_samples = int(cfg['n_samples'] if n_samples is None else n_samples)
+    seed = int(cfg['seed'] if seed is None else seed)
+    x = sample_design_space(
+        n_vars, n_samples, seed, bool(cfg['include_corners']), int(cfg['lhs_candidates'])
+    )
+    return x, n_samples, seed
+
+
+def fit_calibration(
+    scenario: str,
+    n_vars: int,
+    x: Array,
+    full_f: ArrayLike,
+    full_g: ArrayLike,
+    inputs: list[SimplifiedInputs] | None,
+    n_samples: int,
+    seed: int,
+) -> Scaling:
+    """Eq. 25 fit from full-model values at the calibration designs.
+
+    The simplified model runs at the same designs; for handling each sample uses the
+    inputs captured from its own full run (``inputs[i]``), as at an iterate.
+    """
+    full = np.column_stack([np.asarray(full_f, dtype=float), np.asarray(full_g, dtype=float)])
+    if scenario == 'ride':
+        simp = simplified_values('ride', x, n_vars)
+    else:
+        if inputs is None or len(inputs) != len(x):
+            raise ValueError('the handling calibration needs the full model inputs per sample')
+        simp = np.vstack(
+            [simplified_values(scenario, x[i], n_vars, inputs[i]) for i in range(len(x))]
+        )
+    return fit_scaling(x, full, simp, key=scaling_key(scenario, n_vars, n_samples, seed))
+
+
 def calibrate(
     scenario: str,
     n_vars: int,
@@ -96,28 +141,12 @@ def calibrate(
     Scaling
         With the samples, both models' values and the key.
     """
-    cfg = load_simplified_config()['scaling']
-    n_samples = int(cfg['n_samples'] if n_samples is None else n_samples)
-    seed = int(cfg['seed'] if seed is None else seed)
-    x = sample_design_space(
-        n_vars, n_samples, seed, bool(cfg['include_corners']), int(cfg['lhs_candidates'])
-    )
+    x, n_samples, seed = calibration_designs(n_vars, n_samples, seed)
     if run_full is None:
         from suspension_tuning.vehicle.scenarios import run_scenario as run_full
     res = run_full(scenario, x)
-    full = np.column_stack([res.f, res.g])
-    if scenario == 'ride':
-        simp = simplified_values('ride', x, n_vars)
-    else:
-        simp = np.vstack(
-            [
-                simplified_values(
-                    scenario, x[i], n_vars, SimplifiedInputs.from_scenario_result(res, i)
-                )
-                for i in range(n_samples)
-            ]
-        )
-    return fit_scaling(x, full, simp, key=scaling_key(scenario, n_vars, n_samples, seed))
+    inputs = [SimplifiedInputs.from_scenario_result(res, i) for i in range(n_samples)]
+    return fit_calibration(scenario, n_vars, x, res.f, res.g, inputs, n_samples, seed)
 
 
 def load_or_calibrate(
