@@ -17,14 +17,18 @@ through the axle links at the roll centres; each axle carries the roll moment of
 lateral forces about its roll centre (geometric load transfer).  Body roll about the roll
 axis couples with lateral and yaw acceleration through a constant mass matrix
 (small roll/pitch angles in the inertia terms; the pendulum term m g h sin(phi) is kept).
-Longitudinal load transfer is neglected (speed is nearly constant).  The rear anti-roll bar
-is a torsional spring between the rear body half and the rear axle (paper section 4).
+Longitudinal load transfer is neglected (speed is nearly constant).  Tyre
+lateral forces follow the kinematic slip angles without relaxation length (no lag; fine
+at 65 km/h, where the relaxation time is ~0.03 s) and camber from axle roll is ignored.
+The road under each wheel is the track profile averaged over the tyre contact length.
+The rear anti-roll bar is a torsional spring between the rear body half and the rear axle
+(paper section 4).
 
 Equations are written as ``M acc = Q(state)`` with constant M; see ``mass_matrix`` and
 ``generalised_forces_numpy``.  The compiled kernel (``_kernel.py``) evaluates the same
 equations; ``derivative_numpy`` is the plain numpy reference the tests compare it with.
 
-Integration: classical RK4 with a fixed step (config/vehicle.yaml, 1 ms), independent per
+Integration: classical RK4 with a fixed step (config/vehicle.yaml, 2 ms), independent per
 design, so a design gives the same bits alone, in any batch, and whether it is run in one
 call or in chunks of steps.  Driver and speed controller act at a fixed control period
 (zero-order hold) aligned to absolute step counts.
