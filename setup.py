@@ -11,6 +11,7 @@ PACKAGE = 'suspension_tuning'
 CONSOLE_SCRIPTS = [
     'full_vehicle_sim = suspension_tuning.nodes.full_vehicle_sim:main',
     'valve_controller = suspension_tuning.nodes.valve_controller:main',
+    'gradient_evaluator = suspension_tuning.nodes.gradient_evaluator:main',
     'coordinator = suspension_tuning.nodes.coordinator:main',
     'tune = suspension_tuning.tune:main',
 ]

@@ -130,7 +130,7 @@ class SimulationPool:
                     scenario=scenario, n_vars=n_vars,
                     designs=designs[chunk].ravel().tolist(),
                     publish_telemetry=publish_telemetry and index == 0,
-                    return_inputs=return_inputs and index == 0)
+                    return_inputs=return_inputs)
                 thread = threading.Thread(target=self._send, daemon=True,
                                           args=(worker, request, index, results))
                 threads.append(thread)

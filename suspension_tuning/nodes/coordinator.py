@@ -140,7 +140,8 @@ class CoordinatorNode(Node):
             f = np.concatenate([np.asarray(r.f, float) for r in responses])
             g = np.concatenate([np.asarray(r.g, float).reshape(r.n_designs, r.n_constraints)
                                 for r in responses])
-            return FullEvaluation(f=f, g=g, inputs=responses[0].inputs)
+            inputs = responses[0].inputs[0] if responses[0].inputs else None
+            return FullEvaluation(f=f, g=g, inputs=inputs)
         return evaluate
 
     def _simplified_gradient(self, request: TuningRequest):

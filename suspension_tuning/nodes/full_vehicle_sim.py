@@ -2,7 +2,7 @@
 
 Service ``~/evaluate`` (EvaluateDesign): a scenario and one or many designs in; the
 objective f (eq. 9 or 10), the tyre-hop constraints g (eq. 11), named metrics, the
-simplified models' inputs of the first design and the wall time out.  A bad request
+simplified models' inputs of each design and the wall time out.  A bad request
 (unknown scenario, wrong length, NaN, out of bounds) gets ``success = false`` and the
 reason in ``error``; the node keeps serving.
 
@@ -156,8 +156,9 @@ class FullVehicleSimNode(Node):
         response.metric_names = result.metric_names
         response.metrics = result.metrics.ravel().tolist()
         if request.return_inputs:
-            response.inputs = simplified_inputs.pack(
-                SimplifiedInputs.from_scenario_result(result.result, 0), TimeHistories())
+            response.inputs = [simplified_inputs.pack(
+                SimplifiedInputs.from_scenario_result(result.result, i), TimeHistories())
+                for i in range(len(designs))]
         if request.publish_telemetry:
             self.publish_telemetry(result.result.histories)
         response.wall_time_s = time.monotonic() - start

@@ -1,0 +1,114 @@
+"""Gradient evaluator and the coordinator with simplified-model gradients (eq. 25).
+
+A 2-variable ride optimisation runs end to end through the graph: calibration from
+full-model samples fetched over the graph, Dynamic-Q with one full run and 2n
+simplified runs per iteration.  The same loop in-process gives the same bits.
+"""
+
+import re
+import threading
+
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+
+pytestmark = pytest.mark.ros
+
+SAMPLES = 12  # fewer than the paper's 30 to keep the test short; same code path
+
+
+def wait(future, timeout_s=300.0):
+    done = threading.Event()
+    future.add_done_callback(lambda _: done.set())
+    assert done.wait(timeout_s), 'no answer in time'
+    return future.result()
+
+
+@pytest.fixture
+def graph(ros_context, executor, tmp_path):
+    from rclpy.node import Node
+
+    from suspension_tuning.nodes.coordinator import CoordinatorNode
+    from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
+    from suspension_tuning.nodes.gradient_evaluator import GradientEvaluatorNode
+
+    sim = FullVehicleSimNode(context=ros_context)
+    gradient = GradientEvaluatorNode(context=ros_context, parameter_overrides=[
+        Parameter('calibration_dir', value=str(tmp_path))])
+    coordinator = CoordinatorNode(context=ros_context, parameter_overrides=[
+        Parameter('calibration_samples', value=SAMPLES)])
+    client = Node('graph_test_client', context=ros_context)
+    executor.add(sim, gradient, coordinator, client)
+    return {'sim': sim, 'gradient': gradient, 'coordinator': coordinator, 'client': client}
+
+
+def test_ride_optimisation_with_simplified_gradients_converges_through_the_graph(graph):
+    from rclpy.action import ActionClient
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning import evaluation
+    from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
+    from suspension_tuning.tuning import FullEvaluation, TuningRequest, optimise
+
+    client = ActionClient(graph['client'], Optimise, '/coordinator/optimise')
+    assert client.wait_for_server(timeout_sec=10.0)
+    feedback = []
+    handle = wait(client.send_goal_async(
+        Optimise.Goal(scenario='ride', n_vars=2, gradient_source='simplified'),
+        feedback_callback=feedback.append))
+    result = wait(handle.get_result_async()).result
+    assert result.success, result.message
+    assert result.n_calibration_runs == SAMPLES
+    n = 2
+    # Paper section 2: one full run per iteration (per evaluation) and 2n simplified
+    # runs per gradient; no full-model gradient runs.
+    iterations_evaluated = len(result.history)
+    assert result.n_full_runs == iterations_evaluated
+    assert result.n_simplified_runs % (2 * n) == 0 and result.n_simplified_runs > 0
+    assert len(feedback) == len(result.history)
+    # The same loop in-process, with the in-process eq. 25 calibration: same bits.
+    options = graph['coordinator'].options.as_dict()
+    scaling = calibrate('ride', 2, n_samples=SAMPLES)
+
+    def full_model(points):
+        run = evaluation.evaluate('ride', points)
+        return FullEvaluation(run.f, run.g, run.result)
+
+    local = optimise(TuningRequest('ride', 2, None, 'simplified', options), full_model,
+                     SimplifiedGradient('ride', 2, scaling))
+    np.testing.assert_array_equal(result.x, local.x)
+    assert result.f == local.f
+    assert result.n_simplified_runs == local.n_simplified_runs
+
+
+def test_gradient_service_errors_and_calibration_cache(graph):
+    from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
+
+    node = graph['client']
+    gradient = node.create_client(EvaluateGradient, '/gradient_evaluator/gradient')
+    calibrate = node.create_client(Calibrate, '/gradient_evaluator/calibrate')
+    assert gradient.wait_for_service(timeout_sec=10.0)
+    uncalibrated = wait(gradient.call_async(EvaluateGradient.Request(
+        scenario='ride', n_vars=2, x=[0.5, 0.5])))
+    assert not uncalibrated.success and 'calibrat' in uncalibrated.error
+    first = wait(calibrate.call_async(Calibrate.Request(scenario='ride', n_vars=2,
+                                                        n_samples=SAMPLES)))
+    assert first.success and not first.from_cache and first.n_full_runs == SAMPLES
+    assert first.function_names[0] == 'f'
+    second = wait(calibrate.call_async(Calibrate.Request(scenario='ride', n_vars=2,
+                                                         n_samples=SAMPLES)))
+    assert second.success and second.from_cache and second.n_full_runs == 0
+    np.testing.assert_array_equal(second.r_squared, first.r_squared)  # NaN: constant g
+    for fields, message in [
+        (dict(scenario='ride', n_vars=2, x=[0.5, float('nan')]), 'NaN|nan|finite'),
+        (dict(scenario='ride', n_vars=2, x=[0.5]), 'length|shape|expected'),
+        (dict(scenario='ride', n_vars=2, x=[0.5, 1.5]), 'bound|range|outside'),
+        (dict(scenario='rally', n_vars=2, x=[0.5, 0.5]), 'unknown scenario'),
+        (dict(scenario='handling', n_vars=2, x=[0.5, 0.5]), 'calibrat|inputs'),
+    ]:
+        answer = wait(gradient.call_async(EvaluateGradient.Request(**fields)))
+        assert not answer.success
+        assert re.search(message, answer.error), answer.error
+    good = wait(gradient.call_async(EvaluateGradient.Request(scenario='ride', n_vars=2,
+                                                             x=[0.5, 0.5])))
+    assert good.success and len(good.df) == 2 and good.n_model_runs == 4  # 2n runs
