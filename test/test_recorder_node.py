@@ -205,7 +205,10 @@ def test_per_run_opens_a_bag_at_run_config_and_closes_it_at_result(
 
     from suspension_tuning.bag.reader import read_messages
 
-    node = recorder(ros_context, tmp_path, per_run=True)
+    # only the run's topics: an action status left latched on the domain by another
+    # test's server would otherwise enter the first bag through the pre-run window
+    topics = ['/optimisation/run_config', '/optimisation/progress', '/optimisation/result']
+    node = recorder(ros_context, tmp_path, per_run=True, topics=topics)
     graph = Node('coordinator_under_test', context=ros_context)
     config = graph.create_publisher(String, '/optimisation/run_config', latched_qos())
     progress = graph.create_publisher(IterationRecord, '/optimisation/progress', 100)
@@ -327,3 +330,35 @@ def test_killed_recorder_leaves_a_bag_that_reads_and_reindexes(ros_context, exec
     repaired = read_messages(tmp_path / 'run')
     assert repaired.complete and repaired.message_count == contents.message_count
     assert repaired.counts()['/chatter'] == 30
+
+
+def test_session_keeps_the_last_pre_run_second_and_drops_older_messages(tmp_path):
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from suspension_tuning.bag.reader import read_messages
+    from suspension_tuning.bag.recorder import RecordingSession
+
+    session = RecordingSession(tmp_path, per_run=True, pre_run_s=1.0)
+    session.add_topic('/optimisation/run_config', 'std_msgs/msg/String')
+    session.add_topic('/status', 'std_msgs/msg/String')
+    session.add_topic('/optimisation/result', 'std_msgs/msg/String')
+    t = 1_700_000_000_000_000_000
+    session.write('/status', serialize_message(String(data='old')), t - 3_000_000_000)
+    session.write('/status', serialize_message(String(data='accepted')), t - 500_000_000)
+    session.write(
+        '/optimisation/run_config', serialize_message(String(data='scenario: "ride: 2 vars"\n')), t
+    )
+    closed = session.write(
+        '/optimisation/result', serialize_message(String(data='done')), t + 1_000_000_000
+    )
+    # 3 s before the run_config: outside the 1 s window; 0.5 s before: inside
+    assert session.dropped == 1
+    assert closed is not None and closed.name.endswith('_ride-2-vars')  # name sanitised
+    contents = read_messages(closed)
+    assert [m.topic for m in contents.messages] == [
+        '/status',
+        '/optimisation/run_config',
+        '/optimisation/result',
+    ]
+    assert contents.metadata['run_config']['scenario'] == 'ride: 2 vars'

@@ -5,7 +5,9 @@ message (raw CDR, receive and send times) to :meth:`RecordingSession.write`.  Wi
 ``per_run`` the session opens a new bag ``<YYYYmmdd-HHMMSS>_<scenario>`` when a message
 arrives on ``/optimisation/run_config`` (std_msgs/String, the run's configuration
 YAML; it marks the start of a run) and closes it after ``/optimisation/result`` (the
-end of the run); messages between runs are counted and dropped.  Without
+end of the run).  Messages between runs are held for ``pre_run_s`` (the action's
+goal-accepted status can overtake the run_config on the way to the recorder) and
+written at the start of the next run's bag; older ones are counted and dropped.  Without
 ``per_run`` everything goes to one bag for the whole session.  The run configuration
 is also stored as the MCAP metadata record ``run_config``.
 """
@@ -17,6 +19,7 @@ import re
 import struct
 import threading
 import time
+from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -98,6 +101,9 @@ class RecordingSession:
         Chunk size of the bags, bytes.
     max_chunk_interval_s : float
         Longest time a chunk stays open, s.
+    pre_run_s : float
+        With ``per_run``: messages received up to this long (log time, s) before a
+        run_config go into that run's bag.
     """
 
     def __init__(
@@ -107,7 +113,10 @@ class RecordingSession:
         per_run: bool = True,
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         max_chunk_interval_s: float = DEFAULT_CHUNK_INTERVAL_S,
+        pre_run_s: float = 1.0,
     ) -> None:
+        if pre_run_s < 0:
+            raise ValueError(f'pre_run_s must not be negative, got {pre_run_s}')
         self.output_dir = Path(output_dir)
         self.bag_name = bag_name
         self.per_run = per_run
@@ -117,6 +126,8 @@ class RecordingSession:
         self.bag: BagWriter | None = None
         self.closed_bags: list[Path] = []
         self.dropped = 0
+        self.pre_run_ns = int(pre_run_s * 1e9)
+        self._held: deque[tuple[str, bytes, int, int | None]] = deque()
         self._lock = threading.Lock()
 
     def add_topic(
@@ -169,7 +180,10 @@ class RecordingSession:
             spec = self.topics[topic]
             if self.per_run and topic == RUN_CONFIG_TOPIC:
                 text = decode_cdr_string(data)
-                loaded = yaml.safe_load(text) if text.strip() else {}
+                try:
+                    loaded = yaml.safe_load(text) if text.strip() else {}
+                except yaml.YAMLError:
+                    loaded = {}
                 scenario = (
                     str(loaded.get('scenario', 'run')) if isinstance(loaded, dict) else 'run'
                 )
@@ -177,9 +191,11 @@ class RecordingSession:
                 bag = self._open(run_bag_name(scenario, log_time_ns))
                 bag.add_metadata('run_config', run_config_metadata(text))
                 bag.custom_data['scenario'] = scenario
+                self._release_held(log_time_ns)
             elif self.bag is None:
                 if self.per_run:
-                    self.dropped += 1
+                    self._held.append((topic, bytes(data), log_time_ns, publish_time_ns))
+                    self._prune_held(log_time_ns)
                     return None
                 self._open(self.bag_name or run_bag_name('session', log_time_ns))
             bag = self.bag
@@ -191,6 +207,21 @@ class RecordingSession:
             if self.per_run and topic == RESULT_TOPIC:
                 return self._close_bag()
             return None
+
+    def _prune_held(self, now_ns: int) -> None:
+        while self._held and self._held[0][2] < now_ns - self.pre_run_ns:
+            self._held.popleft()
+            self.dropped += 1
+
+    def _release_held(self, now_ns: int) -> None:
+        """Write the held messages of the last ``pre_run_s`` into the new bag."""
+        self._prune_held(now_ns)
+        while self._held:
+            topic, data, log_ns, publish_ns = self._held.popleft()
+            spec = self.topics[topic]
+            if topic not in self.bag.topics:
+                self.bag.add_topic(topic, spec.type, spec.offered_qos_profiles)
+            self.bag.write(topic, data, log_ns, publish_ns)
 
     def flush(self) -> None:
         """Push the open chunk of the open bag to disk."""

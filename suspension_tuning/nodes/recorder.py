@@ -11,7 +11,7 @@ The publishers' offered QoS is stored as each channel's ``offered_qos_profiles``
 
 Parameters (config/recorder.yaml): ``output_dir``, ``bag_name``, ``per_run``,
 ``topics``, ``exclude_regex``, ``discovery_period_s``, ``chunk_size_bytes``,
-``max_chunk_interval_s``.
+``max_chunk_interval_s``, ``pre_run_s``.
 
 Ctrl-C (SIGINT) or SIGTERM finalises the open bag (summary, statistics,
 metadata.yaml).  A recorder killed with SIGKILL leaves a bag that reads up to its
@@ -50,6 +50,7 @@ from suspension_tuning.bag.writer import qos_profile_dict
 #: dropped while a chunk is compressed (a 20 s ride run at 200 Hz is 4000 messages per
 #: topic, published in one burst by a simulation worker).
 SUBSCRIPTION_DEPTH = 10000
+
 
 def _name(policy: object) -> str:
     """rclpy policy enum -> rosbag2 name (RELIABLE -> 'reliable', ...)."""
@@ -111,6 +112,7 @@ class RecorderNode(Node):
         self.declare_parameter('discovery_period_s', 0.5)
         self.declare_parameter('chunk_size_bytes', 512 * 1024)
         self.declare_parameter('max_chunk_interval_s', 1.0)
+        self.declare_parameter('pre_run_s', 1.0)
         param = self.get_parameter
         self.only = {t for t in param('topics').value if t}
         pattern = param('exclude_regex').value
@@ -121,6 +123,7 @@ class RecorderNode(Node):
             per_run=param('per_run').value,
             chunk_size=int(param('chunk_size_bytes').value),
             max_chunk_interval_s=float(param('max_chunk_interval_s').value),
+            pre_run_s=float(param('pre_run_s').value),
         )
         self.subscribed: dict[str, str] = {}
         self.skipped: dict[str, str] = {}
@@ -131,8 +134,11 @@ class RecorderNode(Node):
         self.discover()
         # A quiet topic must not leave its messages in an open chunk: push the open
         # chunk to disk at least this often (what a SIGKILL can lose).
-        self.create_timer(float(param('max_chunk_interval_s').value), self.session.flush,
-                          callback_group=self._message_group)
+        self.create_timer(
+            float(param('max_chunk_interval_s').value),
+            self.session.flush,
+            callback_group=self._message_group,
+        )
         self.create_timer(
             float(param('discovery_period_s').value),
             self.discover,
@@ -198,8 +204,8 @@ class RecorderNode(Node):
         sent = int(info.get('source_timestamp') or 0) or received
         try:
             closed = self.session.write(topic, data, received, sent)
-        except (ValueError, OSError) as exc:
-            self.get_logger().error(f'message on {topic} not recorded: {exc}')
+        except Exception as exc:  # noqa: BLE001 - never let one message stop the recorder
+            self.get_logger().error(f'message on {topic} not recorded: {exc!r}')
             return
         self.received += 1
         if closed is not None:
