@@ -1,6 +1,6 @@
 """``inspect_bag``: what a recorded run holds, and where to resume it.
 
-``inspect_bag <bag> [--plots DIR] [--json]`` prints:
+``inspect_bag <bag> [--plots DIR] [--json] [--reindex]`` prints:
 
 * the bag: file, complete or truncated (and why), topics with types and message
   counts, start time and duration;
@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from suspension_tuning.bag.reader import BagContents, decode, read_messages
+from suspension_tuning.bag.reader import BagContents, decode, read_messages, reindex
 
 PROGRESS_TOPIC = '/optimisation/progress'
 RESULT_TOPIC = '/optimisation/result'
@@ -438,8 +438,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('bag', help='bag folder or .mcap file')
     parser.add_argument('--plots', metavar='DIR', help='write PNG plots into DIR')
     parser.add_argument('--json', action='store_true', help='print JSON instead of text')
+    parser.add_argument(
+        '--reindex',
+        action='store_true',
+        help='first rewrite a truncated bag (killed recorder) into a complete '
+        'one, like ros2 bag reindex',
+    )
     args = parser.parse_args(argv)
     try:
+        if args.reindex:
+            reindex(args.bag)
         info = summary(args.bag)
     except ValueError as exc:
         print(f'inspect_bag: {exc}', file=sys.stderr)

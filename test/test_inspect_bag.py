@@ -260,3 +260,21 @@ def test_last_iteration_without_records_raises(tmp_path):
         writer.write('/chatter', serialize_message(String(data='hi')), T0)
     with pytest.raises(ValueError, match='no iteration records'):
         last_iteration(tmp_path / 'empty')
+
+
+def test_reindex_option_repairs_a_truncated_bag_before_reporting(bag, tmp_path, capsys):
+    import shutil
+
+    from suspension_tuning.inspect_bag import main
+
+    copy = tmp_path / 'copy'
+    shutil.copytree(bag, copy)
+    (copy / 'metadata.yaml').unlink()
+    mcap = copy / 'run_0.mcap'
+    data = mcap.read_bytes()
+    mcap.write_bytes(data[: len(data) - 200])  # cut inside the summary section
+    assert main([str(copy), '--json', '--reindex']) == 0
+    info = json.loads(capsys.readouterr().out)
+    # the summary was lost, every chunk was whole: all 290 messages, complete again
+    assert info['complete'] and info['message_count'] == 290
+    assert (copy / 'metadata.yaml').is_file()
