@@ -151,3 +151,15 @@ def test_same_design_gives_same_bits_alone_and_in_a_batch(handling_corners):
     np.testing.assert_array_equal(
         alone.histories['roll_deg'][0], handling_corners.histories['roll_deg'][2]
     )
+
+
+def test_four_variable_design_with_equal_axles_equals_two_variable_design(handling_corners):
+    # eqs. 5 and 7: (dpsf, gvol) applied to both axles == (dpsff, gvolf, dpsfr, gvolr) equal
+    x4 = np.array([CORNERS[2, 0], CORNERS[2, 1], CORNERS[2, 0], CORNERS[2, 1]])
+    res4 = scenarios.run_scenario('handling', x4, P)
+    assert res4.x.shape == (1, 4)
+    assert res4.f[0] == handling_corners.f[2]
+    # and a stiffer rear axle changes the result (the variables are really uncoupled)
+    x4b = x4.copy()
+    x4b[3] = 1.0  # soft rear spring
+    assert scenarios.run_scenario('handling', x4b, P).f[0] != res4.f[0]

@@ -788,7 +788,9 @@ class FullVehicleModel:
 
         Gas is conserved per accumulator: disconnecting the large accumulator freezes its
         gas volume and pressure; reconnecting equalises the pressures isentropically (the
-        closed form of ``strut.py``).  Takes effect from the next step.
+        closed form of ``strut.py``).  Takes effect from the next step.  The valves switch
+        at once: their 50-100 ms delay belongs to the valve controller (valve_logic.py),
+        which calls this when a delayed switch lands.
         """
         b = self.batch_size
         soft_new = (
