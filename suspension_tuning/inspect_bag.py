@@ -227,9 +227,11 @@ def last_iteration(path: str | os.PathLike[str]) -> dict[str, Any]:
     dict
         ``history``: records in the form :class:`~suspension_tuning.optim.dynamic_q.DynamicQ`
         accepts (``x``, ``f``, ``g``, ``h`` = [], ``accepted``, ``from_iteration``,
-        ``max_violation``, ``rho_next`` = the recorded move limit on every record);
+        ``max_violation``, ``rho_next``: the move limit the next record used, and for
+        the last record its own move limit);
         ``x``: the last iterate; ``iteration``; ``run_config`` (dict or None);
-        ``scenario`` and ``n_vars`` from it when present.
+        ``scenario``, ``n_vars`` and ``options`` (``optimiser_options``) from it when
+        present.
 
     Raises
     ------
@@ -255,7 +257,13 @@ def last_iteration(path: str | os.PathLike[str]) -> dict[str, Any]:
                 'max_violation': rec['max_violation'],
                 'accepted': True,
                 'from_iteration': k - 1,
-                'rho_next': rec['move_limit'],
+                # IterationRecord.move_limit is the limit the step to this record used (the
+                # coordinator publishes the optimiser's 'rho'); the limit after record k is
+                # the one record k + 1 used.  After the last record it is not recorded: its
+                # own limit is taken (the optimiser may have halved or doubled it).
+                'rho_next': (
+                    records[k + 1]['move_limit'] if k + 1 < len(records) else rec['move_limit']
+                ),
                 'n_full_runs': rec['n_full_runs'],
                 'n_simplified_runs': rec['n_simplified_runs'],
             }
@@ -273,6 +281,7 @@ def last_iteration(path: str | os.PathLike[str]) -> dict[str, Any]:
     if isinstance(config, dict):
         out['scenario'] = config.get('scenario')
         out['n_vars'] = config.get('n_vars')
+        out['options'] = config.get('optimiser_options')
     return out
 
 

@@ -237,7 +237,8 @@ def test_last_iteration_resumes_dynamic_q_at_the_last_record(bag):
     assert state['iteration'] == 3 and state['scenario'] == 'ride' and state['n_vars'] == 2
     assert list(state['x']) == RECORDS[-1]['x']
     assert [h['f'] for h in state['history']] == [r['f'] for r in RECORDS]
-    assert state['history'][-1]['rho_next'] == RECORDS[-1]['move_limit']
+    # move limit after record k = the one record k + 1 used; the last keeps its own
+    assert [h['rho_next'] for h in state['history']] == [0.25, 0.125, 0.0625, 0.0625]
     optimiser = DynamicQ(
         state['history'][0]['x'], [0.001, 0.001], [1.0, 1.0], history=state['history']
     )
