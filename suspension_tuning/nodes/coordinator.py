@@ -85,6 +85,9 @@ class CoordinatorNode(Node):
         self.declare_parameter('fd_step', 0.025)
         self.declare_parameter('optimiser_config', '')
         self.declare_parameter('optimiser_section', 'vehicle')
+        # One more full run at the optimum, publishing its telemetry for the bag; a
+        # recording run, not part of the optimisation's run counts.
+        self.declare_parameter('final_telemetry', True)
         group = ReentrantCallbackGroup()
         self.timeout_s = float(self.get_parameter('call_timeout_s').value)
         self.pool = SimulationPool(self, list(self.get_parameter('sim_workers').value),
@@ -199,6 +202,12 @@ class CoordinatorNode(Node):
             self.result_pub.publish(message)
             return message
         physical = physical_settings(result.x)
+        if self.get_parameter('final_telemetry').value and not goal_handle.is_cancel_requested:
+            try:
+                self.pool.evaluate(request.scenario, request.n_vars, result.x[None, :],
+                                   publish_telemetry=True)
+            except (ValueError, ServiceCallError) as error:
+                self.get_logger().warning(f'telemetry run of the optimum failed: {error}')
         message = Optimise.Result(
             success=bool(result.success), message=str(result.message),
             x=np.asarray(result.x, float).tolist(), f=float(result.f),

@@ -1,0 +1,93 @@
+"""The coordinator survives a simulation worker that dies mid-run.
+
+Two workers run as separate processes (``full_vehicle_sim`` renamed sim_0 and sim_1,
+started like ``ros2 run`` would).  One is killed (SIGKILL) after the first iteration;
+its pending designs time out and are sent to the other worker, and the optimisation
+still returns a result.  With every worker gone the goal fails with a clear message.
+"""
+
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+from rclpy.parameter import Parameter
+
+pytestmark = pytest.mark.ros
+
+TIMEOUT_S = 8.0  # worker declared dead after this (a 4-design handling batch takes < 1 s)
+
+
+def wait(future, timeout_s=300.0):
+    done = threading.Event()
+    future.add_done_callback(lambda _: done.set())
+    assert done.wait(timeout_s), 'no answer in time'
+    return future.result()
+
+
+def start_worker(name):
+    exe = [sys.executable, '-m', 'suspension_tuning.nodes.full_vehicle_sim']
+    return subprocess.Popen([*exe, '--ros-args', '-r', f'__node:={name}',
+                             '-p', 'telemetry_decimation:=50'],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def test_optimisation_survives_a_killed_worker_and_fails_clearly_without_any(
+        ros_context, executor):
+    from rclpy.action import ActionClient
+    from rclpy.node import Node
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning.nodes.coordinator import CoordinatorNode
+
+    workers = {name: start_worker(name) for name in ('sim_0', 'sim_1')}
+    try:
+        coordinator = CoordinatorNode(context=ros_context, parameter_overrides=[
+            Parameter('sim_workers', value=['/sim_0', '/sim_1']),
+            Parameter('call_timeout_s', value=TIMEOUT_S),
+            Parameter('final_telemetry', value=False)])
+        client_node = Node('pool_test_client', context=ros_context)
+        executor.add(coordinator, client_node)
+        deadline = time.monotonic() + 60.0
+        while not all(c.service_is_ready() for c in coordinator.pool.clients.values()):
+            assert time.monotonic() < deadline, 'workers did not come up'
+            time.sleep(0.2)
+        client = ActionClient(client_node, Optimise, '/coordinator/optimise')
+        assert client.wait_for_server(timeout_sec=10.0)
+        killed = threading.Event()
+
+        def on_feedback(feedback):
+            if not killed.is_set():  # kill sim_0 after the first iteration
+                workers['sim_0'].send_signal(signal.SIGKILL)
+                killed.set()
+
+        # Full-model gradients: each gradient is a batch of 2n = 4 designs spread over
+        # both workers, so the dead worker's share must be redone elsewhere.
+        handle = wait(client.send_goal_async(
+            Optimise.Goal(scenario='handling', n_vars=2, gradient_source='full',
+                          max_iterations=3), feedback_callback=on_feedback))
+        result = wait(handle.get_result_async()).result
+        assert killed.is_set()
+        assert result.success or 'maximum number of iterations' in result.message, \
+            result.message
+        assert result.iterations >= 1 and len(result.x) == 2
+        assert coordinator.pool.alive == ['/sim_1']
+        # Now the last worker dies too: the goal fails with a clear error.
+        workers['sim_1'].send_signal(signal.SIGKILL)
+        workers['sim_1'].wait(timeout=10)
+        handle = wait(client.send_goal_async(
+            Optimise.Goal(scenario='handling', n_vars=2, gradient_source='full',
+                          max_iterations=2)))
+        failed = wait(handle.get_result_async()).result
+        assert not failed.success
+        assert 'no simulation worker left' in failed.message
+    finally:
+        for process in workers.values():
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+                try:
+                    process.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    process.kill()
