@@ -13,6 +13,9 @@ CONSOLE_SCRIPTS = [
     'valve_controller = suspension_tuning.nodes.valve_controller:main',
     'gradient_evaluator = suspension_tuning.nodes.gradient_evaluator:main',
     'coordinator = suspension_tuning.nodes.coordinator:main',
+    'recorder = suspension_tuning.nodes.recorder:main',
+    'replay = suspension_tuning.nodes.replay:main',
+    'graph = suspension_tuning.graph:main',
     'tune = suspension_tuning.tune:main',
 ]
 

@@ -106,7 +106,9 @@ def main(argv: list[str] | None = None) -> int:
         print(format_result(result), flush=True)
         status = 0 if result.success else 1
     finally:
-        executor.shutdown()
+        executor.shutdown(timeout_sec=5.0)
+        spinner.join(timeout=5.0)
+        client.destroy()
         node.destroy_node()
         rclpy.try_shutdown()
     return status

@@ -22,9 +22,11 @@ pytestmark = pytest.mark.ros
 PACKAGE = 'suspension_tuning'
 EXECUTABLES = sorted(ep.name for ep in distribution(PACKAGE).entry_points
                      if ep.group == 'console_scripts')
-#: Executables that are ROS nodes and stay up until interrupted; the others are tools.
+#: Executables that are ROS nodes and stay up until interrupted (replay exits when its
+#: bag is played: tested in test_replay_node.py); the others are command-line tools.
 NODES = {name for name in EXECUTABLES
-         if (Path(__file__).parents[1] / PACKAGE / 'nodes' / f'{name}.py').exists()}
+         if (Path(__file__).parents[1] / PACKAGE / 'nodes' / f'{name}.py').exists()} - {'replay'}
+TOOLS = sorted(set(EXECUTABLES) - NODES - {'replay'})
 
 
 def test_package_is_registered_in_the_ament_index():
@@ -70,3 +72,13 @@ def test_node_starts_via_ament_lookup_and_stops_on_sigint(name, ros_context, exe
         process.send_signal(signal.SIGINT)
         output, _ = process.communicate(timeout=20)
     assert process.returncode == 0, output
+
+
+@pytest.mark.parametrize('name', TOOLS)
+def test_tool_prints_its_usage(name):
+    from ament_index_python.packages import get_package_prefix
+
+    path = Path(get_package_prefix(PACKAGE)) / 'lib' / PACKAGE / name
+    run = subprocess.run([str(path), '--help'], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0, run.stderr
+    assert 'usage' in run.stdout.lower()

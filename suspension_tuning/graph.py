@@ -1,0 +1,80 @@
+"""``graph``: every node of the tuning graph in one process.
+
+``ros2 run suspension_tuning graph --workers 2`` starts the simulation workers
+(``sim_0``, ``sim_1``, ...), the gradient evaluator, the valve controller, the
+coordinator and (unless ``--no-record``) the recorder on one MultiThreadedExecutor.
+ROS parameters come from ``--ros-args --params-file config/graph.yaml`` like for any
+node.  Each node also runs alone with ``ros2 run suspension_tuning <node>``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+
+def build_nodes(workers: int = 1, record: bool = True, context=None,
+                recorder_overrides: list[Parameter] | None = None) -> list[Node]:
+    """Create the graph's nodes (not spinning).
+
+    Parameters
+    ----------
+    workers : int
+        Number of simulation workers; 1 keeps the default name ``full_vehicle_sim``.
+    record : bool
+        Add the recorder node (one bag per optimisation run).
+    context : rclpy.context.Context, optional
+        Context of the nodes (tests use their own).
+    recorder_overrides : list of Parameter, optional
+        Parameters of the recorder (e.g. its output folder).
+    """
+    from suspension_tuning.nodes.coordinator import CoordinatorNode
+    from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
+    from suspension_tuning.nodes.gradient_evaluator import GradientEvaluatorNode
+    from suspension_tuning.nodes.valve_controller import ValveControllerNode
+
+    if workers < 1:
+        raise ValueError(f'need at least one simulation worker, got {workers}')
+    names = ['full_vehicle_sim'] if workers == 1 else [f'sim_{i}' for i in range(workers)]
+    nodes: list[Node] = [FullVehicleSimNode(name, context=context) for name in names]
+    worker_param = Parameter('sim_workers', value=[f'/{name}' for name in names])
+    nodes.append(GradientEvaluatorNode(context=context, parameter_overrides=[
+        Parameter('sim_service', value=f'/{names[0]}/evaluate')]))
+    nodes.append(ValveControllerNode(context=context))
+    nodes.append(CoordinatorNode(context=context, parameter_overrides=[worker_param]))
+    if record:
+        from suspension_tuning.nodes.recorder import RecorderNode
+        nodes.append(RecorderNode(context=context,
+                                  parameter_overrides=recorder_overrides or []))
+    return nodes
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run suspension_tuning graph``."""
+    argv = sys.argv if argv is None else ['graph', *argv]
+    parser = argparse.ArgumentParser(prog='graph', description=__doc__.split('\n')[0])
+    parser.add_argument('--workers', type=int, default=1, help='simulation workers')
+    parser.add_argument('--no-record', action='store_true', help='no recorder node')
+    args = parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
+    rclpy.init(args=argv)
+    nodes = build_nodes(args.workers, not args.no_record)
+    executor = MultiThreadedExecutor(num_threads=max(4, 2 * len(nodes)))
+    for node in nodes:
+        executor.add_node(node)
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        for node in reversed(nodes):
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,37 @@
+"""`tune` sends a goal, prints progress per iteration and the optimum in physical units."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from rclpy.parameter import Parameter
+
+pytestmark = pytest.mark.ros
+
+
+def test_tune_prints_progress_and_the_physical_optimum(ros_context, executor):
+    from suspension_tuning.nodes.coordinator import CoordinatorNode
+    from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
+
+    executor.add(FullVehicleSimNode(context=ros_context),
+                 CoordinatorNode(context=ros_context, parameter_overrides=[
+                     Parameter('final_telemetry', value=False)]))
+    tune = Path(sys.prefix) / 'bin' / 'tune'
+    run = subprocess.run([str(tune), '--scenario', 'handling', '--n-vars', '2',
+                          '--gradient', 'full', '--max-iterations', '2'],
+                         capture_output=True, text=True, timeout=300, env=os.environ.copy())
+    out = run.stdout
+    assert 'iteration   0' in out and 'max violation' in out, out + run.stderr
+    assert 'optimum in physical units' in out
+    assert 'gas_volume_front_l' in out and 'dpsf_front' in out
+    assert 'full-model runs:' in out
+
+
+def test_tune_without_a_coordinator_says_so(ros_context):
+    tune = Path(sys.prefix) / 'bin' / 'tune'
+    run = subprocess.run([str(tune), '--server-timeout', '1', '--action', '/nobody/optimise'],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2
+    assert 'no action server /nobody/optimise' in run.stderr
