@@ -333,7 +333,7 @@ def deriv(
         vc = ss[i, SS_VREF] - P[P_AP] * x_s
         vg = ss[i, SS_VGUARD]
         vv = vc if vc > vg else vg
-        p = (ss[i, SS_KSUM] / vv) ** P[P_N]
+        p = math.exp(P[P_N] * math.log(ss[i, SS_KSUM] / vv))  # (K/V)^n
         if vc < vg:
             p -= P[P_N] * p / vv * (vc - vg)
         press[i] = p
@@ -563,10 +563,7 @@ def integrate(
     n_b = states.shape[0]
     n = states.shape[1]
     for bi in prange(n_b):
-        k1 = np.empty(n)
-        k2 = np.empty(n)
-        k3 = np.empty(n)
-        k4 = np.empty(n)
+        kk = np.empty((4, n))
         tmp = np.empty(n)
         full = np.empty(N_FULL)
         hist = np.empty(N_HIST)
@@ -578,13 +575,40 @@ def integrate(
         cs = cstates[bi]
         spc = int(C[C_SPC])
         ctrl_on = C[C_STEER_ON] > 0.0 or C[C_SPEED_ON] > 0.0
+        want = full_out.shape[2] > 0
         for k in range(n_steps):
             if ctrl_on and (step0 + k) % spc == 0:
                 controller(s, uin, cs, C, ytab)
-            want = full_out.shape[2] > 0
-            deriv(
-                s, ss, uin, P, Minv, pc, dk, dv, ds, rx0, rdx, rzl, rzr, k1, full, hist, True, work
-            )
+            for st in range(4):  # classical RK4 stages (one call site: deriv is inlined)
+                if st == 0:
+                    for j in range(n):
+                        tmp[j] = s[j]
+                elif st < 3:
+                    for j in range(n):
+                        tmp[j] = s[j] + 0.5 * dt * kk[st - 1, j]
+                else:
+                    for j in range(n):
+                        tmp[j] = s[j] + dt * kk[2, j]
+                deriv(
+                    tmp,
+                    ss,
+                    uin,
+                    P,
+                    Minv,
+                    pc,
+                    dk,
+                    dv,
+                    ds,
+                    rx0,
+                    rdx,
+                    rzl,
+                    rzr,
+                    kk[st],
+                    full,
+                    hist,
+                    st == 0,
+                    work,
+                )
             if want:
                 for c in range(N_FULL):
                     full_out[bi, c, full_off + k] = full[c]
@@ -593,70 +617,4 @@ def integrate(
                     hist_out[bi, c, hj] = hist[c]
                 hj += 1
             for j in range(n):
-                tmp[j] = s[j] + 0.5 * dt * k1[j]
-            deriv(
-                tmp,
-                ss,
-                uin,
-                P,
-                Minv,
-                pc,
-                dk,
-                dv,
-                ds,
-                rx0,
-                rdx,
-                rzl,
-                rzr,
-                k2,
-                full,
-                hist,
-                False,
-                work,
-            )
-            for j in range(n):
-                tmp[j] = s[j] + 0.5 * dt * k2[j]
-            deriv(
-                tmp,
-                ss,
-                uin,
-                P,
-                Minv,
-                pc,
-                dk,
-                dv,
-                ds,
-                rx0,
-                rdx,
-                rzl,
-                rzr,
-                k3,
-                full,
-                hist,
-                False,
-                work,
-            )
-            for j in range(n):
-                tmp[j] = s[j] + dt * k3[j]
-            deriv(
-                tmp,
-                ss,
-                uin,
-                P,
-                Minv,
-                pc,
-                dk,
-                dv,
-                ds,
-                rx0,
-                rdx,
-                rzl,
-                rzr,
-                k4,
-                full,
-                hist,
-                False,
-                work,
-            )
-            for j in range(n):
-                s[j] = s[j] + dt / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
+                s[j] = s[j] + dt / 6.0 * (kk[0, j] + 2.0 * kk[1, j] + 2.0 * kk[2, j] + kk[3, j])
