@@ -310,3 +310,24 @@ def test_steady_turn_roll_angle_matches_quasi_static_hand_calculation():
     # tyre nonlinearity (measured difference ~1.5 %)
     assert out['roll_rad'][0] == pytest.approx(phi_hand, rel=0.05)
     assert out['speed_mps'][0] == pytest.approx(SPEED, abs=0.1)  # speed controller holds
+
+
+def test_gas_in_each_accumulator_is_conserved_through_a_switch_cycle():
+    model = fm.FullVehicleModel(P)
+    setting = fm.SuspensionSetting.baseline(P, 1)  # soft 0.5 L = 0.1 L small + 0.4 L large
+    model.reset(setting, fm.ValveState.ride(1), 0.0, solve_equilibrium=False)
+    model.set_valve_state(spring_soft=False)  # stiff at static: large accumulator closed
+    x = 0.02  # [m] then compress every strut by 20 mm (body lowered, axles held)
+    model._state[0, K.I_ZS] = -x
+    load = P.static_strut_load_front_n
+    a_p = P.strut.piston_area_m2
+    p_atm = P.strut.atmospheric_pressure_pa
+    f_stiff = (model.outputs()['strut_pressure_pa'][0, 0] - p_atm) * a_p
+    # stiff: the 0.1 L accumulator alone is compressed (polytropic, strut.gas_force_n)
+    assert f_stiff == pytest.approx(strut.gas_force_n(x, 0.1e-3, load, P), rel=1e-9)
+    model.set_valve_state(spring_soft=True)  # reconnect at 20 mm: pressures equalise
+    f_soft = (model.outputs()['strut_pressure_pa'][0, 0] - p_atm) * a_p
+    # hand result: with each gas polytropic, p^(1/n) (V1 + V2) = K1 + K2 after mixing the
+    # pressures, the same state as a 0.5 L spring compressed 20 mm from static
+    assert f_soft == pytest.approx(strut.gas_force_n(x, 0.5e-3, load, P), rel=1e-9)
+    assert f_soft < f_stiff  # reconnection lets the compressed small accumulator relax
