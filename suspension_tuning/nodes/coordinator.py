@@ -105,6 +105,12 @@ class CoordinatorNode(Node):
         self.config_pub = self.create_publisher(String, '/optimisation/run_config', LATCHED)
         self.result_pub = self.create_publisher(Optimise.Result, '/optimisation/result',
                                                 LATCHED)
+        # Read and dumped once: the configuration a run records does not change while the
+        # node runs (YAML in pure Python costs tens of ms, paid at start-up, not per run).
+        files = {path.name: yaml.safe_load(path.read_text())
+                 for path in sorted(CONFIG_DIR.glob('*.yaml'))}
+        self.static_config_yaml = yaml.safe_dump(
+            {'vehicle_configuration': files, 'code_version': code_version()}, sort_keys=False)
         self.server = ActionServer(self, Optimise, '~/optimise', execute_callback=self._execute,
                                    goal_callback=lambda _: GoalResponse.ACCEPT,
                                    cancel_callback=lambda _: CancelResponse.ACCEPT,
@@ -128,12 +134,10 @@ class CoordinatorNode(Node):
             'optimiser_options': request.options, 'fd_step': request.fd_step,
             'coordinator_parameters': {name: p.value for name, p in
                                        self.get_parameters_by_prefix('').items()},
-            'vehicle_configuration': {path.name: yaml.safe_load(path.read_text())
-                                      for path in sorted(CONFIG_DIR.glob('*.yaml'))},
-            'code_version': code_version(),
             'started_unix_s': time.time(),
         }
-        self.config_pub.publish(String(data=yaml.safe_dump(config, sort_keys=False)))
+        text = yaml.safe_dump(config, sort_keys=False) + self.static_config_yaml
+        self.config_pub.publish(String(data=text))
 
     def _full_model(self, request: TuningRequest):
         def evaluate(designs: np.ndarray) -> FullEvaluation:
