@@ -61,5 +61,73 @@ def main() -> None:
         print(f'messages_per_chunk: {N / bag.chunk_count:.0f}')
 
 
+def bench_node(n: int = 4_000) -> None:
+    """Recorder node in-process: a reliable publisher sends n struts messages at once.
+
+    n stays below Fast DDS's default reader resource limit (max_samples 5000): a
+    larger burst than the recorder drains in time loses samples.
+    """
+    import os
+
+    if os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE') != 'LOCALHOST':
+        print('recorder_node: skipped (set ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)')
+        return
+    import threading
+
+    import rclpy
+    from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from suspension_tuning.nodes.recorder import RecorderNode
+
+    rclpy.init()
+    for label, make in (
+        ('single_threaded', SingleThreadedExecutor),
+        ('multi_threaded', lambda: MultiThreadedExecutor(num_threads=2)),
+    ):
+        with tempfile.TemporaryDirectory() as tmp:
+            recorder = RecorderNode(
+                parameter_overrides=[
+                    Parameter('output_dir', value=tmp),
+                    Parameter('per_run', value=False),
+                    Parameter('discovery_period_s', value=0.1),
+                    Parameter('topics', value=['/struts']),
+                ]
+            )
+            talker = Node('bench_talker')
+            pub = talker.create_publisher(
+                JointState, '/struts', QoSProfile(depth=n, reliability=ReliabilityPolicy.RELIABLE)
+            )
+            executor = make()
+            executor.add_node(recorder)
+            executor.add_node(talker)
+            thread = threading.Thread(target=executor.spin, daemon=True)
+            thread.start()
+            while pub.get_subscription_count() == 0:
+                time.sleep(0.05)
+            msg = JointState(
+                name=['FL', 'FR', 'RL', 'RR'],
+                position=[0.01] * 4,
+                velocity=[0.1] * 4,
+                effort=[4000.0] * 4,
+            )
+            start = time.perf_counter()
+            for _ in range(n):
+                pub.publish(msg)
+            while recorder.received < n and time.perf_counter() - start < 60:
+                time.sleep(0.01)
+            elapsed = time.perf_counter() - start
+            print(f'recorder_node_{label}_messages_received: {recorder.received} of {n}')
+            print(f'recorder_node_{label}_messages_per_s: {recorder.received / elapsed:.0f}')
+            executor.shutdown()
+            thread.join(timeout=5)
+            recorder.destroy_node()
+            talker.destroy_node()
+    rclpy.try_shutdown()
+
+
 if __name__ == '__main__':
     main()
+    bench_node()

@@ -29,7 +29,7 @@ import time
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import (
     DurabilityPolicy,
@@ -46,9 +46,9 @@ from suspension_tuning.bag.definitions import (
 from suspension_tuning.bag.recorder import RecordingSession
 from suspension_tuning.bag.writer import qos_profile_dict
 
-#: Depth of the recorder's subscriptions: deep enough that bursts of telemetry are not
-#: dropped while a chunk is compressed (a 20 s ride run at 200 Hz is 4000 messages per
-#: topic, published in one burst by a simulation worker).
+#: Depth of the recorder's subscriptions: deep enough that a burst of telemetry (a 20 s
+#: run at 200 Hz is 4000 samples per topic) waits instead of being overwritten while the
+#: recorder drains it (Fast DDS also caps a reader at 5000 samples by default).
 SUBSCRIPTION_DEPTH = 10000
 
 
@@ -227,7 +227,10 @@ def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning recorder``."""
     rclpy.init(args=args)
     node = RecorderNode()
-    executor = MultiThreadedExecutor(num_threads=2)
+    # Single-threaded: no callback blocks, and rclpy's MultiThreadedExecutor costs more
+    # per message (benchmarks/bench_recorder.py, this 2-core machine: 3900-6100 against
+    # 1900-2400 messages/s).
+    executor = SingleThreadedExecutor()
     executor.add_node(node)
     try:
         executor.spin()
