@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ._kernel import _hermite, _pacejka, _pen
 
@@ -66,7 +66,7 @@ OH_ROLL, OH_ROLL_RATE, OH_AY, OH_FZ0, OH_FY0 = 0, 1, 2, 3, 7
 N_H_OUT = 11
 
 
-@njit(cache=True, inline='always', error_model='numpy')
+@njit(cache=True, inline='always', error_model='numpy', fastmath=True)
 def _strut(x, xd, ss_ax, sp, dk, dv, ds):
     """4S4 strut force [N] (strut.strut_force: gas + dpsf damper + stops)."""
     vc = ss_ax[SS_V] - sp[S_AP] * x
@@ -85,7 +85,7 @@ def _strut(x, xd, ss_ax, sp, dk, dv, ds):
     return f_gas + f_damp + f_stop
 
 
-@njit(cache=True, inline='always', error_model='numpy')
+@njit(cache=True, inline='always', error_model='numpy', fastmath=True)
 def _tyre(defl, defl_d, k, c):
     """Point-follower tyre force [N] (tyre.vertical_force, paper eq. 19)."""
     if defl <= 0.0:
@@ -94,7 +94,7 @@ def _tyre(defl, defl_d, k, c):
     return f if f > 0.0 else 0.0
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', fastmath=True)
 def pp_deriv(s, ss, P, dk, dv, ds, zf, zfd, zr, zrd, d, out, want):
     """Pitch-plane state derivative, paper eqs. 15-24 (z up, theta nose down).
 
@@ -138,7 +138,7 @@ def pp_deriv(s, ss, P, dk, dv, ds, zf, zfd, zr, zrd, d, out, want):
         out[O_FSR] = fr
 
 
-@njit(cache=True, inline='always', error_model='numpy')
+@njit(cache=True, inline='always', error_model='numpy', fastmath=True)
 def _pp_acc(zs, th, zaf, zar, zsd, thd, zafd, zard, ssf, ssr, P, dk, dv, ds, zf, zfd, zr, zrd):
     """Accelerations and forces of the pitch-plane model as scalars (same as pp_deriv)."""
     a = P[PP_A]
@@ -155,19 +155,20 @@ def _pp_acc(zs, th, zaf, zar, zsd, thd, zafd, zard, ssf, ssr, P, dk, dv, ds, zf,
     return zsdd, thdd, zafdd, zardd, tf, tr, ff, fr
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', fastmath=True, parallel=True)
 def pp_integrate(states, sstates, P, dk, dv, ds, zf, zfd, zr, zrd, dt, n_steps, out):
     """RK4 over ``n_steps`` for every design (in place); road arrays at half steps.
 
     ``zf, zfd, zr, zrd`` have ``2 n_steps + 1`` samples at times ``k dt / 2``.  Outputs
-    ``out[b, :, k]`` are taken at the start of step k (first RK stage, no extra cost).
+    ``out[b, k, :]`` (step-major: one cache line per step) are taken at the start of step
+    k (first RK stage, no extra cost).
     Same equations as :func:`pp_deriv`, written on scalars for speed.
     """
     h2 = 0.5 * dt
     h6 = dt / 6.0
     xd = P[PP_XD]
     xp = P[PP_XP]
-    for bi in range(states.shape[0]):
+    for bi in prange(states.shape[0]):
         ssf = sstates[bi, 0]
         ssr = sstates[bi, 1]
         q0, q1, q2, q3, v0, v1, v2, v3 = (
@@ -202,14 +203,14 @@ def pp_integrate(states, sstates, P, dk, dv, ds, zf, zfd, zr, zrd, dt, n_steps, 
                 zr[j],
                 zrd[j],
             )
-            out[bi, O_ACC_D, k] = a0 - xd * a1
-            out[bi, O_ACC_P, k] = a0 - xp * a1
-            out[bi, O_FZF, k] = tf
-            out[bi, O_FZR, k] = tr
-            out[bi, O_ZS, k] = q0
-            out[bi, O_TH, k] = q1
-            out[bi, O_FSF, k] = ff
-            out[bi, O_FSR, k] = fr
+            out[bi, k, O_ACC_D] = a0 - xd * a1
+            out[bi, k, O_ACC_P] = a0 - xp * a1
+            out[bi, k, O_FZF] = tf
+            out[bi, k, O_FZR] = tr
+            out[bi, k, O_ZS] = q0
+            out[bi, k, O_TH] = q1
+            out[bi, k, O_FSF] = ff
+            out[bi, k, O_FSR] = fr
             # stage 2
             p0, p1, p2, p3 = q0 + h2 * v0, q1 + h2 * v1, q2 + h2 * v2, q3 + h2 * v3
             w0, w1, w2, w3 = v0 + h2 * a0, v1 + h2 * a1, v2 + h2 * a2, v3 + h2 * a3
@@ -291,7 +292,7 @@ def pp_integrate(states, sstates, P, dk, dv, ds, zf, zfd, zr, zrd, dt, n_steps, 
         states[bi, 4], states[bi, 5], states[bi, 6], states[bi, 7] = v0, v1, v2, v3
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', fastmath=True)
 def h_deriv(s, ss, P, dk, dv, ds, pc, slip, delta, d, out, want):
     """Handling-model derivative, paper eqs. 12-14 (ISO axes, phi positive left up).
 
@@ -353,18 +354,21 @@ def h_deriv(s, ss, P, dk, dv, ds, pc, slip, delta, d, out, want):
         out[OH_FY0 + 3] = fy3
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', fastmath=True, parallel=True)
 def h_integrate(states, sstates, P, dk, dv, ds, pc, slip, delta, dt, n_steps, out):
-    """RK4 of the handling model; ``slip`` (4, 2n+1) and ``delta`` (2n+1,) at half steps."""
-    o = np.empty(N_H_OUT)
-    dummy = np.empty(N_H_OUT)
-    tmp = np.empty(N_H_STATE)
-    k1 = np.empty(N_H_STATE)
-    k2 = np.empty(N_H_STATE)
-    k3 = np.empty(N_H_STATE)
-    k4 = np.empty(N_H_STATE)
-    sl = np.empty(4)
-    for bi in range(states.shape[0]):
+    """RK4 of the handling model; ``slip`` (4, 2n+1) and ``delta`` (2n+1,) at half steps.
+
+    Outputs ``out[b, k, :]`` (step-major) at the start of each step.
+    """
+    for bi in prange(states.shape[0]):
+        o = np.empty(N_H_OUT)  # per-design scratch (designs run in parallel)
+        dummy = np.empty(N_H_OUT)
+        tmp = np.empty(N_H_STATE)
+        k1 = np.empty(N_H_STATE)
+        k2 = np.empty(N_H_STATE)
+        k3 = np.empty(N_H_STATE)
+        k4 = np.empty(N_H_STATE)
+        sl = np.empty(4)
         s = states[bi]
         ss = sstates[bi]
         for k in range(n_steps):
@@ -373,7 +377,7 @@ def h_integrate(states, sstates, P, dk, dv, ds, pc, slip, delta, dt, n_steps, ou
                 sl[c] = slip[c, j]
             h_deriv(s, ss, P, dk, dv, ds, pc, sl, delta[j], k1, o, True)
             for c in range(N_H_OUT):
-                out[bi, c, k] = o[c]
+                out[bi, k, c] = o[c]
             for c in range(4):
                 sl[c] = slip[c, j + 1]
             for i in range(N_H_STATE):

@@ -210,13 +210,14 @@ class HandlingModel:
         P = self._P.copy()
         P[SK.HP_U] = inputs.speed_mps
         states = np.zeros((b, SK.N_H_STATE))
-        out = np.empty((b, SK.N_H_OUT, n))
+        out = np.empty((b, n, SK.N_H_OUT))
         SK.h_integrate(
             states, ss, P, self._dk, self._dv, self._ds, self._pc, slip, steer,
             dt, n, out,
         )  # fmt: skip
         if not np.all(np.isfinite(out)):
             raise RuntimeError('handling-model integration diverged (non-finite outputs)')
+        out = out.transpose(0, 2, 1)  # (batch, channel, time) views
         return HandlingRecord(
             t_s=t_out,
             roll_rad=out[:, SK.OH_ROLL],
