@@ -15,6 +15,7 @@ CONSOLE_SCRIPTS = [
     'coordinator = suspension_tuning.nodes.coordinator:main',
     'recorder = suspension_tuning.nodes.recorder:main',
     'replay = suspension_tuning.nodes.replay:main',
+    'inspect_bag = suspension_tuning.inspect_bag:main',
     'graph = suspension_tuning.graph:main',
     'tune = suspension_tuning.tune:main',
 ]

@@ -339,7 +339,7 @@ def test_session_keeps_the_last_pre_run_second_and_drops_older_messages(tmp_path
     from suspension_tuning.bag.reader import read_messages
     from suspension_tuning.bag.recorder import RecordingSession
 
-    session = RecordingSession(tmp_path, per_run=True, pre_run_s=1.0)
+    session = RecordingSession(tmp_path, per_run=True, pre_run_s=1.0, post_run_s=0.0)
     session.add_topic('/optimisation/run_config', 'std_msgs/msg/String')
     session.add_topic('/status', 'std_msgs/msg/String')
     session.add_topic('/optimisation/result', 'std_msgs/msg/String')
@@ -362,3 +362,28 @@ def test_session_keeps_the_last_pre_run_second_and_drops_older_messages(tmp_path
         '/optimisation/result',
     ]
     assert contents.metadata['run_config']['scenario'] == 'ride: 2 vars'
+
+
+def test_session_keeps_a_finished_run_open_for_late_messages(tmp_path):
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from suspension_tuning.bag.reader import read_messages
+    from suspension_tuning.bag.recorder import RecordingSession
+
+    session = RecordingSession(tmp_path, per_run=True, pre_run_s=1.0, post_run_s=1.0)
+    for topic in ('/optimisation/run_config', '/telemetry', '/optimisation/result'):
+        session.add_topic(topic, 'std_msgs/msg/String')
+    t = 1_700_000_000_000_000_000
+    second = 1_000_000_000
+    session.write('/optimisation/run_config', serialize_message(String(data='scenario: ride')), t)
+    assert session.write('/optimisation/result', serialize_message(String(data='r')),
+                         t + second) is None  # still open: 1 s grace
+    # A telemetry sample of the run served after the result, inside the grace period.
+    assert session.write('/telemetry', serialize_message(String(data='late')),
+                         t + second + second // 2) is None
+    assert session.flush(now_ns=t + second + second // 2) is None  # grace not over
+    closed = session.flush(now_ns=t + 2 * second)  # grace over: closed by the timer
+    assert closed is not None
+    topics = [m.topic for m in read_messages(closed).messages]
+    assert topics == ['/optimisation/run_config', '/optimisation/result', '/telemetry']

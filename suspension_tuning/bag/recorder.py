@@ -104,6 +104,11 @@ class RecordingSession:
     pre_run_s : float
         With ``per_run``: messages received up to this long (log time, s) before a
         run_config go into that run's bag.
+    post_run_s : float
+        With ``per_run``: the run's bag stays open this long (log time, s) after its
+        result arrived, for messages of the run still queued on other topics (the
+        executor serves topics in no particular order; the optimum's telemetry is
+        published just before the result).
     """
 
     def __init__(
@@ -114,9 +119,11 @@ class RecordingSession:
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         max_chunk_interval_s: float = DEFAULT_CHUNK_INTERVAL_S,
         pre_run_s: float = 1.0,
+        post_run_s: float = 1.0,
     ) -> None:
-        if pre_run_s < 0:
-            raise ValueError(f'pre_run_s must not be negative, got {pre_run_s}')
+        if pre_run_s < 0 or post_run_s < 0:
+            raise ValueError(f'pre_run_s and post_run_s must not be negative, got '
+                             f'{pre_run_s}, {post_run_s}')
         self.output_dir = Path(output_dir)
         self.bag_name = bag_name
         self.per_run = per_run
@@ -127,6 +134,8 @@ class RecordingSession:
         self.closed_bags: list[Path] = []
         self.dropped = 0
         self.pre_run_ns = int(pre_run_s * 1e9)
+        self.post_run_ns = int(post_run_s * 1e9)
+        self._close_at_ns: int | None = None
         self._held: deque[tuple[str, bytes, int, int | None]] = deque()
         self._lock = threading.Lock()
 
@@ -157,6 +166,7 @@ class RecordingSession:
         return self.bag
 
     def _close_bag(self) -> Path | None:
+        self._close_at_ns = None
         if self.bag is None:
             return None
         path = self.bag.close()
@@ -178,6 +188,9 @@ class RecordingSession:
             if topic not in self.topics:
                 raise ValueError(f'topic {topic} was not declared with add_topic()')
             spec = self.topics[topic]
+            closed = None
+            if self._close_at_ns is not None and log_time_ns >= self._close_at_ns:
+                closed = self._close_bag()
             if self.per_run and topic == RUN_CONFIG_TOPIC:
                 text = decode_cdr_string(data)
                 try:
@@ -196,7 +209,7 @@ class RecordingSession:
                 if self.per_run:
                     self._held.append((topic, bytes(data), log_time_ns, publish_time_ns))
                     self._prune_held(log_time_ns)
-                    return None
+                    return closed
                 self._open(self.bag_name or run_bag_name('session', log_time_ns))
             bag = self.bag
             if not self.per_run and topic == RUN_CONFIG_TOPIC:
@@ -205,8 +218,10 @@ class RecordingSession:
                 bag.add_topic(topic, spec.type, spec.offered_qos_profiles)
             bag.write(topic, data, log_time_ns, publish_time_ns)
             if self.per_run and topic == RESULT_TOPIC:
-                return self._close_bag()
-            return None
+                if self.post_run_ns == 0:
+                    return self._close_bag()
+                self._close_at_ns = log_time_ns + self.post_run_ns
+            return closed
 
     def _prune_held(self, now_ns: int) -> None:
         while self._held and self._held[0][2] < now_ns - self.pre_run_ns:
@@ -223,11 +238,18 @@ class RecordingSession:
                 self.bag.add_topic(topic, spec.type, spec.offered_qos_profiles)
             self.bag.write(topic, data, log_ns, publish_ns)
 
-    def flush(self) -> None:
-        """Push the open chunk of the open bag to disk."""
+    def flush(self, now_ns: int | None = None) -> Path | None:
+        """Push the open chunk to disk; close a finished run's bag once its grace is over.
+
+        Returns the path of the bag closed, if any.
+        """
+        now_ns = time.time_ns() if now_ns is None else now_ns
         with self._lock:
+            if self._close_at_ns is not None and now_ns >= self._close_at_ns:
+                return self._close_bag()
             if self.bag is not None:
                 self.bag.flush()
+            return None
 
     def close(self) -> Path | None:
         """Finalise the open bag (summary, metadata.yaml); returns its path."""

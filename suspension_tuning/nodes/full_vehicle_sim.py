@@ -34,12 +34,7 @@ import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import (
-    QoSProfile,
-    ReliabilityPolicy,
-    qos_profile_sensor_data,
-    qos_profile_services_default,
-)
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_services_default
 from rclpy.service_introspection import ServiceIntrospectionState
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
@@ -52,6 +47,11 @@ from suspension_tuning.vehicle.simplified import SimplifiedInputs
 CORNERS = ['FL', 'FR', 'RL', 'RR']
 #: Vehicle states and valve states must not be dropped in a step-locked run.
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+#: Telemetry of a run is published as one burst after the simulation (thousands of
+#: samples within a second), not at sensor rate: a reliable writer deep enough for a
+#: whole run keeps every sample for the recorder; best-effort subscribers (plot tools)
+#: are compatible with it.
+TELEMETRY = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
 
 
 class TopicValveController:
@@ -122,8 +122,7 @@ class FullVehicleSimNode(Node):
         service = self.create_service(EvaluateDesign, '~/evaluate', self._on_evaluate)
         service.configure_introspection(self.get_clock(), qos_profile_services_default,
                                         ServiceIntrospectionState.CONTENTS)
-        self.pub = {name: self.create_publisher(kind, f'~/telemetry/{name}',
-                                                qos_profile_sensor_data)
+        self.pub = {name: self.create_publisher(kind, f'~/telemetry/{name}', TELEMETRY)
                     for name, kind in (('imu', Imu), ('struts', JointState),
                                        ('tyres', JointState), ('seats', JointState),
                                        ('steering', JointState))}

@@ -11,7 +11,7 @@ The publishers' offered QoS is stored as each channel's ``offered_qos_profiles``
 
 Parameters (config/recorder.yaml): ``output_dir``, ``bag_name``, ``per_run``,
 ``topics``, ``exclude_regex``, ``discovery_period_s``, ``chunk_size_bytes``,
-``max_chunk_interval_s``, ``pre_run_s``.
+``max_chunk_interval_s``, ``pre_run_s``, ``post_run_s``.
 
 Ctrl-C (SIGINT) or SIGTERM finalises the open bag (summary, statistics,
 metadata.yaml).  A recorder killed with SIGKILL leaves a bag that reads up to its
@@ -113,6 +113,7 @@ class RecorderNode(Node):
         self.declare_parameter('chunk_size_bytes', 512 * 1024)
         self.declare_parameter('max_chunk_interval_s', 1.0)
         self.declare_parameter('pre_run_s', 1.0)
+        self.declare_parameter('post_run_s', 1.0)
         param = self.get_parameter
         self.only = {t for t in param('topics').value if t}
         pattern = param('exclude_regex').value
@@ -124,6 +125,7 @@ class RecorderNode(Node):
             chunk_size=int(param('chunk_size_bytes').value),
             max_chunk_interval_s=float(param('max_chunk_interval_s').value),
             pre_run_s=float(param('pre_run_s').value),
+            post_run_s=float(param('post_run_s').value),
         )
         self.subscribed: dict[str, str] = {}
         self.skipped: dict[str, str] = {}
@@ -135,8 +137,8 @@ class RecorderNode(Node):
         # A quiet topic must not leave its messages in an open chunk: push the open
         # chunk to disk at least this often (what a SIGKILL can lose).
         self.create_timer(
-            float(param('max_chunk_interval_s').value),
-            self.session.flush,
+            min(float(param('max_chunk_interval_s').value), 0.25),
+            self._flush,
             callback_group=self._message_group,
         )
         self.create_timer(
@@ -208,6 +210,11 @@ class RecorderNode(Node):
             self.get_logger().error(f'message on {topic} not recorded: {exc!r}')
             return
         self.received += 1
+        if closed is not None:
+            self.get_logger().info(f'bag closed: {closed}')
+
+    def _flush(self) -> None:
+        closed = self.session.flush()
         if closed is not None:
             self.get_logger().info(f'bag closed: {closed}')
 

@@ -1,0 +1,149 @@
+"""``make demo``: the paper's method end to end on the ROS 2 graph, recorded.
+
+Starts the graph (simulation worker, gradient evaluator, valve controller, coordinator,
+recorder) in this process on loopback DDS, then runs the 4-variable ride optimisation
+and the 4-variable handling optimisation with simplified-model gradients (each starts
+with the eq. 25 calibration from 30 full-model samples, cached across runs).  Prints the
+progress of each iteration, the optimum settings in physical units beside the baseline
+vehicle, where the bags are and the plots written from them, and the wall time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import threading
+import time
+from pathlib import Path
+
+os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+if os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] != 'LOCALHOST':
+    sys.exit('demo: ROS_AUTOMATIC_DISCOVERY_RANGE must be LOCALHOST (DDS stays on loopback)')
+os.environ.setdefault('ROS_DOMAIN_ID', '42')
+
+import numpy as np  # noqa: E402
+
+
+def baseline_design(n_vars: int) -> np.ndarray:
+    """The standard vehicle's settings (config/scenarios.yaml) as a normalised design."""
+    from suspension_tuning.vehicle.design import AxleSettings, from_physical
+    from suspension_tuning.vehicle.params import load_scenarios_config
+
+    base = load_scenarios_config()['baseline_design']
+    gas = float(base['gas_volume_l']) * 1e-3
+    settings = AxleSettings(*(np.array([v]) for v in (float(base['dpsf']), gas,
+                                                       float(base['dpsf']), gas)))
+    return from_physical(settings, n_vars)[0]
+
+
+def wait(future, timeout_s: float | None = None):
+    """Wait for an rclpy future completed by the spinning thread."""
+    done = threading.Event()
+    future.add_done_callback(lambda _: done.set())
+    if not done.wait(timeout_s):
+        raise TimeoutError('the graph did not answer in time')
+    return future.result()
+
+
+def report(scenario: str, result, baseline_f: float, baseline_x: np.ndarray) -> str:
+    """The optimum beside the baseline, in physical units."""
+    from suspension_tuning.tuning import physical_settings
+
+    base = physical_settings(baseline_x)
+    lines = [f'{scenario}: {result.message}',
+             f'  {"setting":<22}{"baseline":>10}{"optimum":>10}']
+    for name, value in zip(result.physical_names, result.physical_values):
+        lines.append(f'  {name:<22}{base[name]:>10.3f}{value:>10.3f}')
+    change = 100.0 * (result.f - baseline_f) / abs(baseline_f) if baseline_f else float('nan')
+    lines.append(f'  {"objective f":<22}{baseline_f:>10.4f}{result.f:>10.4f}'
+                 f'   ({change:+.1f} %)')
+    lines.append(f'  largest constraint g  {max(result.g):.3f} (<= 0 feasible, eq. 11)')
+    lines.append(f'  iterations {result.iterations}, full-model runs {result.n_full_runs}, '
+                 f'simplified runs {result.n_simplified_runs}, calibration runs '
+                 f'{result.n_calibration_runs}, {result.wall_time_s:.1f} s')
+    return '\n'.join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the demo; return the exit status."""
+    parser = argparse.ArgumentParser(prog='demo', description=__doc__.split('\n')[0])
+    parser.add_argument('--bags', default='bags', help='folder for the recorded bags')
+    parser.add_argument('--n-vars', type=int, default=4, help='2 or 4 design variables')
+    parser.add_argument('--scenarios', nargs='+', default=['ride', 'handling'])
+    args = parser.parse_args(argv)
+    start = time.perf_counter()
+
+    import rclpy
+    from rclpy.action import ActionClient
+    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from suspension_tuning_interfaces.action import Optimise
+    from suspension_tuning_interfaces.srv import EvaluateDesign
+
+    from suspension_tuning.graph import build_nodes
+    from suspension_tuning.inspect_bag import write_plots
+    from suspension_tuning.tune import format_feedback
+
+    rclpy.init()
+    bags = Path(args.bags).resolve()
+    nodes = build_nodes(workers=1, record=True, recorder_overrides=[
+        Parameter('output_dir', value=str(bags))])
+    recorder = nodes[-1]
+    client_node = Node('demo')
+    executor = MultiThreadedExecutor(num_threads=12)
+    for node in [*nodes, client_node]:
+        executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    status = 0
+    try:
+        action = ActionClient(client_node, Optimise, '/coordinator/optimise')
+        evaluate = client_node.create_client(EvaluateDesign, '/full_vehicle_sim/evaluate')
+        if not (action.wait_for_server(timeout_sec=30) and evaluate.wait_for_service(30)):
+            print('demo: the graph did not come up', file=sys.stderr)
+            return 1
+        print(f'graph up: {", ".join(n.get_name() for n in nodes)} '
+              f'(ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]}, loopback only)', flush=True)
+        outputs = []
+        for scenario in args.scenarios:
+            x_base = baseline_design(args.n_vars)
+            base = wait(evaluate.call_async(EvaluateDesign.Request(
+                scenario=scenario, n_vars=args.n_vars, designs=x_base.tolist())), 600)
+            print(f'\n== {scenario}: {args.n_vars} variables, simplified-model gradients '
+                  f'(baseline f = {base.f[0]:.4f})', flush=True)
+            closed_before = len(recorder.session.closed_bags)
+            handle = wait(action.send_goal_async(
+                Optimise.Goal(scenario=scenario, n_vars=args.n_vars,
+                              gradient_source='simplified'),
+                feedback_callback=lambda fb: print('  ' + format_feedback(fb.feedback.latest),
+                                                   flush=True)), 60)
+            result = wait(handle.get_result_async()).result
+            status |= 0 if result.success else 1
+            deadline = time.monotonic() + 30
+            while len(recorder.session.closed_bags) == closed_before:
+                if time.monotonic() > deadline:
+                    raise TimeoutError('the recorder did not close the run\'s bag')
+                time.sleep(0.1)
+            bag = recorder.session.closed_bags[-1]
+            plots = write_plots(bag, bag / 'plots')
+            outputs.append((scenario, result, base.f[0], x_base, bag, plots))
+        print()
+        for scenario, result, base_f, x_base, bag, plots in outputs:
+            print(report(scenario, result, base_f, x_base))
+            print(f'  bag: {bag}')
+            print(f'  plots: {", ".join(str(p) for p in plots)}')
+            print(f'  inspect: .venv/bin/inspect_bag {bag}')
+    finally:
+        executor.shutdown(timeout_sec=10)
+        spinner.join(timeout=10)
+        for node in [*nodes, client_node]:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    print(f'\ndemo_wall_time_s: {time.perf_counter() - start:.1f}')
+    return status
+
+
+if __name__ == '__main__':
+    sys.exit(main())
