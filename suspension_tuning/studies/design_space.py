@@ -209,6 +209,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f'scaling_loaded_from_cache: {cached}')
     for name, d in sc.summary().items():
         print(f'{args.scenario}_{name}_r2: {d["r2"]:.4f}')
+        print(f'{args.scenario}_{name}_r2_linear: {d["r2_linear"]:.4f}')
         print(f'{args.scenario}_{name}_rule: {d["rule"]}')
         print(f'{args.scenario}_{name}_gradient_factor: {d["gradient_factor"]:.4f}')
     pairs = [(0, 1)] if args.n_vars == 2 else [(1, 3), (0, 2)]
@@ -216,6 +217,7 @@ def main(argv: list[str] | None = None) -> int:
         png = out / f'design_space_{args.scenario}_{args.n_vars}_{axes[0]}{axes[1]}.png'
         g = grid_comparison(args.scenario, sc, args.n_vars, axes, png=png)
         print(f'{args.scenario}_grid_{axes[0]}{axes[1]}_r2: {g["r2"]:.4f}')
+        print(f'{args.scenario}_grid_{axes[0]}{axes[1]}_r2_linear: {g["r2_linear"]:.4f}')
         print(f'{args.scenario}_grid_{axes[0]}{axes[1]}_png: {png}')
     ga = gradient_agreement(
         args.scenario, sc, validation_points(args.n_vars, args.points), args.n_vars
