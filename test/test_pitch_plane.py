@@ -164,3 +164,13 @@ def test_bad_designs_raise_value_error():
         model.evaluate(np.array([0.5, 0.5, 0.5]), 2)
     with pytest.raises(ValueError):
         PitchPlaneModel(P, dt_s=-1.0)
+
+
+def test_a_design_gives_the_same_bits_alone_or_in_any_batch_position():
+    # designs are integrated independently (numba prange over designs): central
+    # differences need f(x) not to depend on what else is in the batch
+    model = PitchPlaneModel(P)
+    x = np.array([0.3, 0.7])
+    alone = model.evaluate(x, 2)['f']
+    batch = model.evaluate(np.array([[0.9, 0.1], x, [0.001, 1.0]]), 2)['f']
+    assert batch[1] == alone[0]
