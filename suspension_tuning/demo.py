@@ -76,13 +76,12 @@ def main(argv: list[str] | None = None) -> int:
 
     import rclpy
     from rclpy.action import ActionClient
-    from rclpy.executors import MultiThreadedExecutor
     from rclpy.node import Node
     from rclpy.parameter import Parameter
     from suspension_tuning_interfaces.action import Optimise
     from suspension_tuning_interfaces.srv import EvaluateDesign
 
-    from suspension_tuning.graph import build_nodes
+    from suspension_tuning.graph import SpinningGraph, build_nodes
     from suspension_tuning.inspect_bag import write_plots
     from suspension_tuning.tune import format_feedback
 
@@ -92,11 +91,7 @@ def main(argv: list[str] | None = None) -> int:
         Parameter('output_dir', value=str(bags))])
     recorder = nodes[-1]
     client_node = Node('demo')
-    executor = MultiThreadedExecutor(num_threads=12)
-    for node in [*nodes, client_node]:
-        executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
+    graph = SpinningGraph(nodes, [client_node])
     status = 0
     try:
         action = ActionClient(client_node, Optimise, '/coordinator/optimise')
@@ -136,10 +131,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f'  plots: {", ".join(str(p) for p in plots)}')
             print(f'  inspect: .venv/bin/inspect_bag {bag}')
     finally:
-        executor.shutdown(timeout_sec=10)
-        spinner.join(timeout=10)
-        for node in [*nodes, client_node]:
-            node.destroy_node()
+        graph.shutdown()
         rclpy.try_shutdown()
     print(f'\ndemo_wall_time_s: {time.perf_counter() - start:.1f}')
     return status

@@ -11,9 +11,15 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import (
+    Executor,
+    ExternalShutdownException,
+    MultiThreadedExecutor,
+    SingleThreadedExecutor,
+)
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -54,6 +60,57 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
     return nodes
 
 
+class SpinningGraph:
+    """The graph's nodes spinning in background threads.
+
+    The recorder gets an executor of its own (single-threaded, the fastest for raw
+    subscriptions): on the shared executor a telemetry burst of thousands of messages
+    would wait behind the other nodes' callbacks.  :meth:`shutdown` stops the executors,
+    joins the threads and destroys the nodes (the recorder finalises its bag).
+    """
+
+    def __init__(self, nodes: list[Node], extra: list[Node] = ()) -> None:
+        from suspension_tuning.nodes.recorder import RecorderNode
+
+        self.nodes = [*nodes, *extra]
+        recorders = [n for n in self.nodes if isinstance(n, RecorderNode)]
+        others = [n for n in self.nodes if not isinstance(n, RecorderNode)]
+        self.executors: list[Executor] = [MultiThreadedExecutor(
+            num_threads=max(4, 2 * len(others)), context=others[0].context)]
+        for node in others:
+            self.executors[0].add_node(node)
+        for node in recorders:
+            executor = SingleThreadedExecutor(context=node.context)
+            executor.add_node(node)
+            self.executors.append(executor)
+        self.threads = [threading.Thread(target=self._spin, args=(e,), daemon=True)
+                        for e in self.executors]
+        for thread in self.threads:
+            thread.start()
+
+    @staticmethod
+    def _spin(executor: Executor) -> None:
+        try:
+            executor.spin()
+        except ExternalShutdownException:
+            pass
+
+    def wait(self) -> None:
+        """Block until the executors stop (Ctrl-C raises KeyboardInterrupt here)."""
+        for thread in self.threads:
+            while thread.is_alive():
+                thread.join(timeout=0.5)
+
+    def shutdown(self) -> None:
+        """Stop spinning and destroy the nodes."""
+        for executor in self.executors:
+            executor.shutdown(timeout_sec=10.0)
+        for thread in self.threads:
+            thread.join(timeout=10.0)
+        for node in reversed(self.nodes):
+            node.destroy_node()
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning graph``."""
     argv = sys.argv if argv is None else ['graph', *argv]
@@ -62,17 +119,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument('--no-record', action='store_true', help='no recorder node')
     args = parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
     rclpy.init(args=argv)
-    nodes = build_nodes(args.workers, not args.no_record)
-    executor = MultiThreadedExecutor(num_threads=max(4, 2 * len(nodes)))
-    for node in nodes:
-        executor.add_node(node)
+    graph = SpinningGraph(build_nodes(args.workers, not args.no_record))
     try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
+        graph.wait()
+    except KeyboardInterrupt:
         pass
     finally:
-        for node in reversed(nodes):
-            node.destroy_node()
+        graph.shutdown()
         rclpy.try_shutdown()
 
 

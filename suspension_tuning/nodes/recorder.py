@@ -113,7 +113,7 @@ class RecorderNode(Node):
         self.declare_parameter('chunk_size_bytes', 512 * 1024)
         self.declare_parameter('max_chunk_interval_s', 1.0)
         self.declare_parameter('pre_run_s', 1.0)
-        self.declare_parameter('post_run_s', 1.0)
+        self.declare_parameter('post_run_s', 3.0)
         param = self.get_parameter
         self.only = {t for t in param('topics').value if t}
         pattern = param('exclude_regex').value
