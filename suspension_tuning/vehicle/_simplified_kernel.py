@@ -292,7 +292,7 @@ def pp_integrate(states, sstates, P, dk, dv, ds, zf, zfd, zr, zrd, dt, n_steps, 
         states[bi, 4], states[bi, 5], states[bi, 6], states[bi, 7] = v0, v1, v2, v3
 
 
-@njit(cache=True, error_model='numpy', fastmath=True)
+@njit(cache=True, inline='always', error_model='numpy', fastmath=True)
 def h_deriv(s, ss, P, dk, dv, ds, pc, slip, delta, d, out, want):
     """Handling-model derivative, paper eqs. 12-14 (ISO axes, phi positive left up).
 
