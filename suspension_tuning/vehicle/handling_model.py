@@ -186,7 +186,8 @@ class HandlingModel:
         RK4 with the largest step not above ``time_step_s`` that is the input interval or
         an even multiple ``m`` of it.  The inputs at the half steps are then the input
         samples themselves (``m`` even) or linear interpolations (midpoint averages,
-        ``m = 1``); outputs come at the step times.
+        ``m = 1``); outputs come at the step times.  The run stops two steps after the
+        manoeuvre window, the last time any metric uses.
         """
         if not isinstance(inputs, HandlingInputs):
             raise ValueError(f'inputs must be HandlingInputs, got {type(inputs).__name__}')
@@ -197,15 +198,19 @@ class HandlingModel:
             m -= 1
         m = max(m, 1)
         dt = m * inputs.dt_s
+        # the metrics end with the manoeuvre window: stop two steps after it
+        n_all = int(np.searchsorted(inputs.t_s, inputs.manoeuvre_s[1] + 2.0 * dt)) + 1
+        n_all = min(max(n_all, 3), inputs.t_s.size)
+        t_in = inputs.t_s[:n_all]
         if m == 1:
-            slip = _half_steps(inputs.slip_angle_rad)
-            steer = _half_steps(inputs.steer_rad[None, :])[0]
-            t_out = inputs.t_s[:-1]
+            slip = _half_steps(inputs.slip_angle_rad[:, :n_all])
+            steer = _half_steps(inputs.steer_rad[None, :n_all])[0]
+            t_out = t_in[:-1]
         else:
-            n_in = (inputs.t_s.size - 1) // m * m + 1
+            n_in = (n_all - 1) // m * m + 1
             slip = np.ascontiguousarray(inputs.slip_angle_rad[:, : n_in : m // 2])
             steer = np.ascontiguousarray(inputs.steer_rad[: n_in : m // 2])
-            t_out = inputs.t_s[: n_in - 1 : m]
+            t_out = t_in[: n_in - 1 : m]
         n = t_out.size
         P = self._P.copy()
         P[SK.HP_U] = inputs.speed_mps
