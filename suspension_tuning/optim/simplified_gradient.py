@@ -35,7 +35,8 @@ def as_simplified_inputs(scenario: str, inputs: Any) -> SimplifiedInputs | None:
 
     Accepts None (ride), :class:`SimplifiedInputs`, :class:`HandlingInputs`, a
     ``scenarios.ScenarioResult`` (first design) or any object with a ``result`` attribute
-    holding one (e.g. ``evaluation.DesignEvaluation``).
+    holding one (e.g. ``evaluation.DesignEvaluation``).  Ride needs no inputs: anything
+    but a SimplifiedInputs of another scenario is accepted and ignored.
     """
     if inputs is None:
         if scenario == 'handling':
@@ -45,6 +46,8 @@ def as_simplified_inputs(scenario: str, inputs: Any) -> SimplifiedInputs | None:
         if inputs.scenario != scenario:
             raise ValueError(f'inputs are for scenario {inputs.scenario!r}, not {scenario!r}')
         return inputs
+    if scenario == 'ride':
+        return SimplifiedInputs('ride')  # the ride road comes from config: nothing needed
     if isinstance(inputs, HandlingInputs):
         return SimplifiedInputs('handling', None, inputs)
     result = getattr(inputs, 'result', inputs)
