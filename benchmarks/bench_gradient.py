@@ -33,7 +33,7 @@ from suspension_tuning.optim.simplified_gradient import SimplifiedGradient
 from suspension_tuning.vehicle.scenarios import run_scenario
 
 N_VARS = 4
-REPEATS = 15
+REPEATS = 40
 TARGET = 0.2  # [-] issue 5: one n = 4 gradient <= 0.2 full-model runs
 
 
