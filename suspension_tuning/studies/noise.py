@@ -142,6 +142,43 @@ def sweep_x1(
     return out
 
 
+def step_sweep(
+    scenario: str,
+    scaling: Scaling | None = None,
+    n_vars: int = 2,
+    steps: tuple[float, ...] = (0.005, 0.01, 0.025, 0.05),
+) -> dict[str, Array]:
+    """Central-difference gradient of f at the centre for several half steps h.
+
+    Physics-reference 1.8 suggests h in {0.005, 0.01, 0.025, 0.05}: a noisy model gives
+    gradients that scatter as h shrinks; a smooth one gives converging values.  The full
+    model's stencils for every h run in one batch; the simplified gradient uses the
+    inputs of the full run at the centre.
+
+    Returns
+    -------
+    dict
+        'steps' (k,), 'df_full', 'df_simplified' (k, n), 'cosine' (k,).
+    """
+    from suspension_tuning.optim.finite_diff import central_difference_points
+    from suspension_tuning.optim.simplified_gradient import SimplifiedGradient
+
+    x = np.full(n_vars, CENTRE)
+    stencils = [central_difference_points(x, h, X_LOWER, X_UPPER) for h in steps]
+    full = run_scenario(scenario, np.vstack([x[None]] + [st[0] for st in stencils]))
+    inputs = SimplifiedInputs.from_scenario_result(full, 0)
+    k = len(steps)
+    df_full, df_simp, cos = np.empty((k, n_vars)), np.empty((k, n_vars)), np.empty(k)
+    for i, h in enumerate(steps):
+        f = full.f[1 + 2 * n_vars * i : 1 + 2 * n_vars * (i + 1)]
+        df_full[i] = (f[:n_vars] - f[n_vars:]) / stencils[i][1]
+        df_simp[i] = SimplifiedGradient(scenario, n_vars, scaling, h)(x, inputs)[0]
+        na, nb = np.linalg.norm(df_full[i]), np.linalg.norm(df_simp[i])
+        cos[i] = float(df_full[i] @ df_simp[i] / (na * nb)) if na > 0 and nb > 0 else np.nan
+    return {'steps': np.asarray(steps), 'df_full': df_full, 'df_simplified': df_simp,
+            'cosine': cos}  # fmt: skip
+
+
 def _plot(png, scenario, x1, models) -> None:
     import matplotlib
 
@@ -188,6 +225,12 @@ def main(argv: list[str] | None = None) -> int:
     for nm, r in res['noise_ratio'].items():
         print(f'{args.scenario}_noise_ratio_full_over_simplified_{nm}: {r:.3e}')
     print(f'{args.scenario}_noise_png: {png}')
+    st = step_sweep(args.scenario, sc, args.n_vars)
+    for h, dfa, dfs, c in zip(st['steps'], st['df_full'], st['df_simplified'], st['cosine'],
+                              strict=True):  # fmt: skip
+        print(f'{args.scenario}_step_{h:g}_df_full: {np.array2string(dfa, precision=5)}')
+        print(f'{args.scenario}_step_{h:g}_df_simplified: {np.array2string(dfs, precision=5)}')
+        print(f'{args.scenario}_step_{h:g}_cosine: {c:.4f}')
     return 0
 
 
