@@ -58,6 +58,7 @@ def _record(msg: Any) -> dict[str, Any]:
         'f': float(msg.f),
         'g': [float(v) for v in msg.g],
         'move_limit': float(msg.move_limit),
+        'move_limit_next': float(getattr(msg, 'move_limit_next', 0.0)),
         'max_violation': float(msg.max_violation),
         'n_full_runs': int(msg.n_full_runs),
         'n_simplified_runs': int(msg.n_simplified_runs),
@@ -261,7 +262,9 @@ def last_iteration(path: str | os.PathLike[str]) -> dict[str, Any]:
                 # coordinator publishes the optimiser's 'rho'); the limit after record k is
                 # the one record k + 1 used.  After the last record it is not recorded: its
                 # own limit is taken (the optimiser may have halved or doubled it).
-                'rho_next': (
+                # Records carry move_limit_next (the coordinator publishes the optimiser's
+                # rho_next); older bags without it fall back to the next record's limit.
+                'rho_next': rec['move_limit_next'] or (
                     records[k + 1]['move_limit'] if k + 1 < len(records) else rec['move_limit']
                 ),
                 'n_full_runs': rec['n_full_runs'],
@@ -448,6 +451,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--plots', metavar='DIR', help='write PNG plots into DIR')
     parser.add_argument('--json', action='store_true', help='print JSON instead of text')
     parser.add_argument(
+        '--resume',
+        action='store_true',
+        help='continue the optimisation from the last recorded iteration (in-process)',
+    )
+    parser.add_argument('--max-iterations', type=int, help='iteration limit for --resume')
+    parser.add_argument(
         '--reindex',
         action='store_true',
         help='first rewrite a truncated bag (killed recorder) into a complete '
@@ -465,6 +474,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.plots:
         for path in write_plots(args.bag, args.plots):
             print(f'plot: {path}', file=sys.stderr)
+    if args.resume:
+        from suspension_tuning.resume import resume
+        from suspension_tuning.tuning import physical_settings
+
+        try:
+            result = resume(args.bag, args.max_iterations)
+        except ValueError as exc:
+            print(f'inspect_bag: cannot resume: {exc}', file=sys.stderr)
+            return 2
+        print(f'resumed: {result.message}; iterations {result.nit}, f = {result.f:.6g}, '
+              f'x = {[round(float(v), 4) for v in result.x]}, full-model runs '
+              f'{result.n_full_runs}, simplified runs {result.n_simplified_runs}')
+        for name, value in physical_settings(result.x).items():
+            print(f'  {name}: {value:.4g}')
     return 0
 
 

@@ -209,6 +209,11 @@ def optimise(request: TuningRequest, full_model: FullModel,
             jac = central_difference(values, x, request.fd_step, lower, upper)
             record = opt.tell((jac[0], jac[1:], None), source='full')
         else:
+            if inputs is None and request.scenario == 'handling':
+                # Resumed from a history: the simplified handling model needs the full
+                # model's steering and slip angles at x (paper 6.1), so run it once.
+                inputs = full_model(x[None, :]).inputs
+                counter.full_runs += 1
             df, dg = simplified_gradient(x, inputs)
             counter.simplified_runs += 2 * n
             record = opt.tell((np.asarray(df, float), np.asarray(dg, float), None),

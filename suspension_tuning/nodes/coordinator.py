@@ -68,7 +68,8 @@ def record_to_msg(record: dict[str, Any], counter: RunCounter, t0: float) -> Ite
     return IterationRecord(
         iteration=int(record['iteration']), x=np.asarray(record['x'], float).tolist(),
         f=float(record['f']), g=np.asarray(record['g'], float).tolist(),
-        move_limit=float(record['rho']), max_violation=float(record['max_violation']),
+        move_limit=float(record['rho']), move_limit_next=float(record['rho_next']),
+        max_violation=float(record['max_violation']),
         n_full_runs=counter.full_runs, n_simplified_runs=counter.simplified_runs,
         wall_time_s=time.monotonic() - t0)
 

@@ -1,0 +1,70 @@
+"""Resume an optimisation from the last iteration recorded in a bag (in-process).
+
+The bag's ``/optimisation/run_config`` says what ran (scenario, variables, gradient
+source, Dynamic-Q options, calibration samples) and its ``/optimisation/progress``
+records say where it got to (:func:`suspension_tuning.inspect_bag.last_iteration`).
+The run continues from the last record with the same loop the coordinator uses
+(:func:`suspension_tuning.tuning.optimise`), the physics called directly.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from typing import Any
+
+from scipy.optimize import OptimizeResult
+
+from suspension_tuning import evaluation
+from suspension_tuning.inspect_bag import last_iteration
+from suspension_tuning.tuning import FullEvaluation, RunCounter, TuningRequest, optimise
+
+
+def resume(bag: str | os.PathLike[str], max_iterations: int | None = None,
+           callback: Callable[[dict[str, Any], RunCounter], bool | None] | None = None
+           ) -> OptimizeResult:
+    """Continue the optimisation recorded in ``bag`` from its last iteration.
+
+    Parameters
+    ----------
+    bag : path
+        Bag folder (or .mcap file) of an optimisation run.
+    max_iterations : int, optional
+        New iteration limit (counted from the start of the original run); default the
+        run's own.
+    callback : callable, optional
+        As for :func:`suspension_tuning.tuning.optimise`.
+
+    Raises
+    ------
+    ValueError
+        The bag has no run configuration or no iteration records.
+    """
+    state = last_iteration(bag)
+    config = state.get('run_config')
+    if not isinstance(config, dict) or 'scenario' not in config:
+        raise ValueError(f'{bag}: no run configuration (/optimisation/run_config) to resume')
+    options = dict(config.get('optimiser_options') or {})
+    if max_iterations is not None:
+        options['maxiter'] = int(max_iterations)
+    request = TuningRequest(config['scenario'], int(config['n_vars']), config['x0'],
+                            config['gradient_source'], options, float(config['fd_step']))
+    last = state['history'][-1]
+    counter = RunCounter(full_runs=int(last['n_full_runs']),
+                         simplified_runs=int(last['n_simplified_runs']))
+
+    def full_model(points):
+        run = evaluation.evaluate(request.scenario, points)
+        return FullEvaluation(run.f, run.g, run.result)
+
+    gradient = None
+    if request.gradient_source == 'simplified':
+        from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
+
+        samples = (config.get('coordinator_parameters') or {}).get('calibration_samples')
+        scaling = calibrate(request.scenario, request.n_vars, n_samples=samples)
+        counter.calibration_runs = len(scaling.x_samples)
+        gradient = SimplifiedGradient(request.scenario, request.n_vars, scaling,
+                                      request.fd_step)
+    return optimise(request, full_model, gradient, callback, history=state['history'],
+                    counter=counter)
