@@ -16,6 +16,7 @@ RECORDS = [
         f=2.0,
         g=[0.25, -1.0],
         move_limit=0.25,
+        move_limit_next=0.25,
         max_violation=0.25,
         n_full_runs=1,
         n_simplified_runs=4,
@@ -27,6 +28,7 @@ RECORDS = [
         f=1.5,
         g=[0.0625, -1.0],
         move_limit=0.25,
+        move_limit_next=0.125,
         max_violation=0.0625,
         n_full_runs=2,
         n_simplified_runs=8,
@@ -38,6 +40,7 @@ RECORDS = [
         f=1.25,
         g=[-0.5, -1.0],
         move_limit=0.125,
+        move_limit_next=0.0625,
         max_violation=0.0,
         n_full_runs=3,
         n_simplified_runs=12,
@@ -49,6 +52,7 @@ RECORDS = [
         f=1.2345678901234567,
         g=[-0.75, -1.0],
         move_limit=0.0625,
+        move_limit_next=0.03125,
         max_violation=0.0,
         n_full_runs=4,
         n_simplified_runs=16,
@@ -237,8 +241,8 @@ def test_last_iteration_resumes_dynamic_q_at_the_last_record(bag):
     assert state['iteration'] == 3 and state['scenario'] == 'ride' and state['n_vars'] == 2
     assert list(state['x']) == RECORDS[-1]['x']
     assert [h['f'] for h in state['history']] == [r['f'] for r in RECORDS]
-    # move limit after record k = the one record k + 1 used; the last keeps its own
-    assert [h['rho_next'] for h in state['history']] == [0.25, 0.125, 0.0625, 0.0625]
+    # move limit after record k = its move_limit_next (the optimiser's rho_next)
+    assert [h['rho_next'] for h in state['history']] == [0.25, 0.125, 0.0625, 0.03125]
     optimiser = DynamicQ(
         state['history'][0]['x'], [0.001, 0.001], [1.0, 1.0], history=state['history']
     )
