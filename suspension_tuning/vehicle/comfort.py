@@ -21,6 +21,7 @@ use a higher sample rate.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -175,8 +176,17 @@ def wb_sos(
     Returns
     -------
     np.ndarray
-        SOS array of shape (n_sections, 6) for :func:`scipy.signal.sosfilt`.
+        SOS array of shape (n_sections, 6) for :func:`scipy.signal.sosfilt` (a copy of
+        a design cached per (fs, prewarp, weighting): every full-model and simplified
+        run weights its seat accelerations with the same filter).
     """
+    return _wb_sos_cached(float(fs_hz), None if prewarp_hz is None else float(prewarp_hz),
+                          weighting).copy()
+
+
+@functools.lru_cache(maxsize=32)
+def _wb_sos_cached(fs_hz: float, prewarp_hz: float | None,
+                   weighting: str | WeightingParameters) -> np.ndarray:
     p = _params(weighting)
     if not np.isfinite(fs_hz) or fs_hz <= 2.0 * p.f2_hz:
         raise ValueError(
