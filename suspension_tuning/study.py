@@ -1,0 +1,1003 @@
+"""``study``: does the simplified-gradient approach pay off? (issue 9, paper section 2).
+
+Thoresson et al. (2009), section 2: with gradients from the eq. 25-scaled simplified
+models an iteration costs one full-model run plus 2n simplified runs ("0.2n + 1"
+full-run equivalents) instead of 2n + 1 full-model runs, without losing the optimum.
+This module measures that claim on our models, in-process (no rclpy at import; the ROS
+message classes are loaded only to write the bags).  For each scenario (ride, handling),
+number of variables (2, 4) and start point (centre of the design space, baseline
+vehicle) it runs
+
+* ``dq_simplified`` - Dynamic-Q with scaled simplified-model central differences (one
+  row per calibration sample count, e.g. the paper's 30 and the 16 of 2^4 corners);
+* ``dq_full`` - Dynamic-Q with full-model central differences (2n full runs per
+  gradient, the same half step as the simplified gradients);
+* ``slsqp`` - SciPy SLSQP with its default gradients: 2-point forward differences
+  with the absolute step sqrt(machine eps) = 1.49e-8 in normalised units, on the full
+  model (n full runs per gradient);
+* ``reference`` - the reference optimum: a dense grid (2 variables: 41 x 41 by
+  default) or a coarse grid (4 variables: 7^4), then SLSQP polishes from the best grid
+  points and from every method's final point; the best feasible result.
+
+All Dynamic-Q runs go through :func:`suspension_tuning.tuning.optimise`, the loop of the
+ROS coordinator.  Cost counting: every full-model run counts once; SLSQP's objective and
+constraints at one x come from one run (cached per x), its finite-difference points
+likewise.  The eq. 25 calibration (N full runs) is reported separately and added per
+run ("full runs incl. calibration"), as a run that calibrates afresh pays it (the
+coordinator caches a calibration across runs of the same scenario and n).
+
+Outputs (``--out``, default ``out/study``): ``method_study.md`` (the tables),
+``results.json``, ``plots/<case>.png`` (f against full-model runs per method) and one
+rosbag2-style bag per run under ``bags/`` (``/optimisation/run_config``,
+``/optimisation/progress``, ``/optimisation/result``, as the graph records them), which
+``inspect_bag`` reads.
+
+Run: ``.venv/bin/python -m suspension_tuning.study [--quick] [--out DIR]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shutil
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import minimize
+
+from suspension_tuning.optim.dynamic_q import load_options
+from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
+from suspension_tuning.paths import config_dir
+from suspension_tuning.tuning import (
+    FullEvaluation,
+    RunCounter,
+    TuningRequest,
+    centre,
+    optimise,
+    physical_settings,
+)
+from suspension_tuning.vehicle.design import X_LOWER, X_UPPER, validate_design
+from suspension_tuning.vehicle.scenarios import run_scenario
+
+Array = NDArray[np.float64]
+
+SCENARIOS = ('ride', 'handling')
+N_VARS = (2, 4)
+STARTS = ('centre', 'baseline')
+METHODS = ('dq_simplified', 'dq_full', 'slsqp', 'reference')
+METHOD_LABELS = {
+    'dq_simplified': 'Dynamic-Q, simplified-model gradients',
+    'dq_full': 'Dynamic-Q, full-model central differences',
+    'slsqp': 'SLSQP, full-model 2-point differences',
+    'reference': 'reference optimum',
+}
+#: Grid points per axis of the reference search (2 and 4 variables) [E: 41 gives a
+#: 0.025 spacing, the central-difference half step; 7^4 = 2401 full runs for n = 4].
+GRID_POINTS = {2: 41, 4: 7}
+#: The same for ``--quick`` (a smoke run, not a reference worth reporting).
+QUICK_GRID_POINTS = {2: 11, 4: 3}
+#: Calibration sample counts of the simplified-gradient runs [P s.6.3.1: 30; issue 9
+#: allows fewer if the optimum holds: 16 = the 2^4 corners for n = 4].
+CALIBRATION_SAMPLES = (30, 16)
+#: Designs per full-model batch of the reference grid [E: ~2 s per ride batch].
+GRID_BATCH = 64
+#: Distinct best grid points polished by SLSQP for the reference [E].
+POLISH_STARTS = 3
+#: Central-difference half step of Dynamic-Q's full-model gradients, normalised
+#: (config/optimiser.yaml finite_difference.h; the simplified gradients use the same).
+FD_STEP = 0.025
+
+
+# ---------------------------------------------------------------------- results
+@dataclass
+class StudyRun:
+    """One optimisation run of the study (or the reference search) and its costs.
+
+    Attributes
+    ----------
+    scenario, n_vars, start, method : str, int, str, str
+        Case and method (see :data:`METHODS`).
+    calibration_samples : int
+        Eq. 25 calibration samples (0 for methods without simplified models).
+    x, f, g : list, float, list
+        Final design (normalised), objective and constraints (full model).
+    max_violation : float
+        max(0, max g) at the final design.
+    iterations : int
+        Optimiser iterations.
+    n_full_runs, n_simplified_runs, n_calibration_runs : int
+        Full-model runs of the optimisation, simplified-model runs, calibration runs.
+    wall_time_s, calibration_wall_time_s : float
+        Wall time of the optimisation and of its calibration (shared by the runs that
+        use the same calibration).
+    success : bool
+    message : str
+    history : list of dict
+        Per iteration: iteration, f, max_violation, n_full_runs, n_simplified_runs, x.
+    distance_to_reference : float
+        Euclidean distance of x to the reference optimum, normalised units.
+    gap_to_reference_pct : float
+        100 (f - f_ref) / |f_ref|.
+    bag : str
+        Bag folder ('' when not recorded).
+    details : dict
+        Method-specific facts (reference: grid size, grid best, polish results).
+    """
+
+    scenario: str
+    n_vars: int
+    start: str
+    method: str
+    calibration_samples: int
+    x: list[float]
+    f: float
+    g: list[float]
+    max_violation: float
+    iterations: int
+    n_full_runs: int
+    n_simplified_runs: int
+    n_calibration_runs: int
+    wall_time_s: float
+    calibration_wall_time_s: float = 0.0
+    success: bool = True
+    message: str = ''
+    history: list[dict[str, Any]] = field(default_factory=list)
+    distance_to_reference: float = math.nan
+    gap_to_reference_pct: float = math.nan
+    bag: str = ''
+    details: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def full_runs_with_calibration(self) -> int:
+        """Full-model runs including the eq. 25 calibration."""
+        return self.n_full_runs + self.n_calibration_runs
+
+    @property
+    def name(self) -> str:
+        """``<scenario>_<n>var_<start>_<method>[_cal<N>]`` (bag and plot names)."""
+        tail = f'_cal{self.calibration_samples}' if self.method == 'dq_simplified' else ''
+        return f'{self.scenario}_{self.n_vars}var_{self.start}_{self.method}{tail}'
+
+
+def max_violation(g: ArrayLike) -> float:
+    """Largest constraint violation max(0, max g) (eq. 11 constraints, <= 0 feasible)."""
+    g = np.asarray(g, dtype=float)
+    return float(max(0.0, np.max(g))) if g.size else 0.0
+
+
+class FullModelCache:
+    """Full-model runs of one scenario, cached per design and counted once each.
+
+    SLSQP asks for the objective and the constraints at one x separately and for their
+    finite differences at the same points: one full run gives both (cost counted once).
+
+    Parameters
+    ----------
+    scenario : str
+        'ride' or 'handling'.
+    n_vars : int
+        2 or 4.
+    """
+
+    def __init__(self, scenario: str, n_vars: int) -> None:
+        self.scenario = scenario
+        self.n_vars = n_vars
+        self.values: dict[bytes, tuple[float, Array]] = {}
+
+    @property
+    def n_runs(self) -> int:
+        """Distinct designs run so far."""
+        return len(self.values)
+
+    def __call__(self, x: ArrayLike) -> tuple[float, Array]:
+        """Objective and constraints at one design (one full run if not cached)."""
+        xv = validate_design(np.asarray(x, dtype=float), self.n_vars)[0]
+        key = xv.tobytes()
+        if key not in self.values:
+            result = run_scenario(self.scenario, xv[None, :], n_vars=self.n_vars)
+            self.values[key] = (float(result.f[0]), np.asarray(result.g[0], float).copy())
+        return self.values[key]
+
+
+def full_model(scenario: str, n_vars: int) -> Callable[[Array], FullEvaluation]:
+    """The full model as :func:`suspension_tuning.tuning.optimise` wants it (in-process)."""
+
+    def evaluate(designs: Array) -> FullEvaluation:
+        result = run_scenario(scenario, designs, n_vars=n_vars)
+        return FullEvaluation(
+            f=np.asarray(result.f, float), g=np.asarray(result.g, float), inputs=result
+        )
+
+    return evaluate
+
+
+def start_point(name: str, n_vars: int) -> Array:
+    """Start design: 'centre' of the design space or the 'baseline' vehicle."""
+    if name == 'centre':
+        return centre(n_vars)
+    if name == 'baseline':
+        from suspension_tuning.demo import baseline_design
+
+        return baseline_design(n_vars)
+    raise ValueError(f'unknown start point {name!r}; valid: {", ".join(STARTS)}')
+
+
+def vehicle_options() -> dict[str, Any]:
+    """Dynamic-Q options of config/optimiser.yaml, section ``vehicle``."""
+    return load_options(str(config_dir() / 'optimiser.yaml'), 'vehicle').as_dict()
+
+
+# ---------------------------------------------------------------------- bag messages
+class _Recorder:
+    """Collects a run's IterationRecord messages (with receive times) for its bag."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled
+        self.messages: list[tuple[int, Any]] = []
+        self.t0 = time.monotonic()
+        if enabled:
+            from suspension_tuning.nodes.coordinator import record_to_msg
+
+            self._to_msg = record_to_msg
+
+    def add(self, record: dict[str, Any], counter: RunCounter) -> None:
+        if self.enabled:
+            self.messages.append((time.time_ns(), self._to_msg(record, counter, self.t0)))
+
+
+def _history_entry(record: dict[str, Any], counter: RunCounter) -> dict[str, Any]:
+    return {
+        'iteration': int(record['iteration']),
+        'f': float(record['f']),
+        'max_violation': float(record['max_violation']),
+        'n_full_runs': counter.full_runs,
+        'n_simplified_runs': counter.simplified_runs,
+        'x': np.asarray(record['x'], float).tolist(),
+    }
+
+
+# ---------------------------------------------------------------------- runs
+def run_dynamic_q(
+    scenario: str,
+    n_vars: int,
+    start: str,
+    gradient_source: str,
+    gradient: SimplifiedGradient | None = None,
+    calibration_samples: int = 0,
+    calibration_wall_time_s: float = 0.0,
+    options: dict[str, Any] | None = None,
+    record: bool = True,
+) -> tuple[StudyRun, _Recorder]:
+    """Dynamic-Q through :func:`suspension_tuning.tuning.optimise` (the coordinator's loop).
+
+    Parameters
+    ----------
+    scenario, n_vars, start : str, int, str
+        Case; ``start`` is 'centre' or 'baseline'.
+    gradient_source : str
+        'simplified' (needs ``gradient``) or 'full' (central differences, half step
+        :data:`FD_STEP`, 2n full runs per gradient).
+    gradient : SimplifiedGradient, optional
+        Eq. 25-scaled simplified-model gradient.
+    calibration_samples : int
+        Full runs spent on the calibration of ``gradient`` (counted in the result).
+    calibration_wall_time_s : float
+        Wall time of that calibration.
+    options : dict, optional
+        Dynamic-Q options (default config/optimiser.yaml ``vehicle``).
+    record : bool
+        Collect the IterationRecord messages for a bag.
+    """
+    options = vehicle_options() if options is None else options
+    request = TuningRequest(
+        scenario, n_vars, start_point(start, n_vars), gradient_source, options, FD_STEP
+    )
+    counter = RunCounter(calibration_runs=calibration_samples)
+    recorder = _Recorder(record)
+    history: list[dict[str, Any]] = []
+
+    def on_iteration(rec: dict[str, Any], counts: RunCounter) -> bool:
+        history.append(_history_entry(rec, counts))
+        recorder.add(rec, counts)
+        return False
+
+    t0 = time.perf_counter()
+    result = optimise(
+        request, full_model(scenario, n_vars), gradient, on_iteration, counter=counter
+    )
+    wall = time.perf_counter() - t0
+    method = 'dq_simplified' if gradient_source == 'simplified' else 'dq_full'
+    run = StudyRun(
+        scenario=scenario,
+        n_vars=n_vars,
+        start=start,
+        method=method,
+        calibration_samples=calibration_samples,
+        x=np.asarray(result.x, float).tolist(),
+        f=float(result.f),
+        g=np.asarray(result.g, float).tolist(),
+        max_violation=max_violation(result.g),
+        iterations=int(result.nit),
+        n_full_runs=counter.full_runs,
+        n_simplified_runs=counter.simplified_runs,
+        n_calibration_runs=counter.calibration_runs,
+        wall_time_s=wall,
+        calibration_wall_time_s=calibration_wall_time_s,
+        success=bool(result.success),
+        message=str(result.message),
+        history=history,
+        details={'optimiser_options': options, 'fd_step': FD_STEP},
+    )
+    return run, recorder
+
+
+def _slsqp(
+    model: FullModelCache,
+    x0: Array,
+    on_iteration: Callable[[Array, int], None] | None = None,
+    maxiter: int = 100,
+) -> Any:
+    """SciPy SLSQP on the cached full model: bounds 0.001..1, constraints -g >= 0."""
+    n = model.n_vars
+
+    def callback(intermediate_result: Any) -> None:
+        if on_iteration is not None:
+            on_iteration(np.asarray(intermediate_result.x, float), 0)
+
+    return minimize(
+        lambda x: model(x)[0],
+        x0,
+        method='SLSQP',
+        bounds=[(X_LOWER, X_UPPER)] * n,
+        constraints=[{'type': 'ineq', 'fun': lambda x: -model(x)[1]}],
+        callback=callback,
+        options={'maxiter': maxiter},
+    )
+
+
+def run_slsqp(
+    scenario: str, n_vars: int, start: str, record: bool = True, maxiter: int = 100
+) -> tuple[StudyRun, _Recorder]:
+    """SciPy SLSQP with its default finite differences on the full model.
+
+    ``jac=None``: SciPy's 2-point forward differences with the absolute step
+    sqrt(machine eps) = 1.49e-8 (normalised units), n full runs per gradient; the
+    objective and the constraints at one x share one full run (:class:`FullModelCache`).
+    """
+    model = FullModelCache(scenario, n_vars)
+    recorder = _Recorder(record)
+    history: list[dict[str, Any]] = []
+    x0 = start_point(start, n_vars)
+
+    def add(x: Array) -> None:
+        f, g = model(x)  # cached: the optimiser evaluated x already
+        rec = {
+            'iteration': len(history),
+            'x': x,
+            'f': f,
+            'g': g,
+            'rho': 0.0,
+            'rho_next': 0.0,
+            'max_violation': max_violation(g),
+        }
+        counter = RunCounter(full_runs=model.n_runs)
+        history.append(_history_entry(rec, counter))
+        recorder.add(rec, counter)
+
+    t0 = time.perf_counter()
+    add(x0)  # iteration 0: the start point (SLSQP's first evaluation, cached)
+    result = _slsqp(model, x0, lambda x, _: add(x), maxiter)
+    wall = time.perf_counter() - t0
+    f, g = model(result.x)
+    run = StudyRun(
+        scenario=scenario,
+        n_vars=n_vars,
+        start=start,
+        method='slsqp',
+        calibration_samples=0,
+        x=np.asarray(result.x, float).tolist(),
+        f=f,
+        g=g.tolist(),
+        max_violation=max_violation(g),
+        iterations=int(result.nit),
+        n_full_runs=model.n_runs,
+        n_simplified_runs=0,
+        n_calibration_runs=0,
+        wall_time_s=wall,
+        success=bool(result.success),
+        message=str(result.message),
+        history=history,
+        details={
+            'jac': '2-point forward differences (scipy default, jac=None)',
+            'eps': float(np.sqrt(np.finfo(float).eps)),
+            'maxiter': maxiter,
+            'ftol': 1e-6,
+        },
+    )
+    return run, recorder
+
+
+def grid_designs(n_vars: int, points: int) -> Array:
+    """Full-factorial grid over the normalised box, ``points`` per axis (bounds included)."""
+    if points < 2:
+        raise ValueError(f'grid points per axis must be >= 2, got {points}')
+    axis = np.linspace(X_LOWER, X_UPPER, points)
+    mesh = np.meshgrid(*[axis] * n_vars, indexing='ij')
+    return np.column_stack([m.ravel() for m in mesh])
+
+
+def reference_optimum(
+    scenario: str,
+    n_vars: int,
+    points: int,
+    extra_starts: Sequence[ArrayLike] = (),
+    gtol: float = 1e-3,
+    record: bool = True,
+) -> tuple[StudyRun, _Recorder]:
+    """Reference optimum: full-factorial grid, then SLSQP polish; the best feasible.
+
+    Parameters
+    ----------
+    scenario, n_vars : str, int
+        Case.
+    points : int
+        Grid points per axis (``points ** n_vars`` full runs, in batches of
+        :data:`GRID_BATCH`).
+    extra_starts : sequence of array_like
+        Further polish starts (the methods' final designs).
+    gtol : float
+        Feasible when max g <= gtol (config/optimiser.yaml vehicle gtol).
+    record : bool
+        Collect IterationRecord messages (grid best, then each improvement) for a bag.
+
+    Returns
+    -------
+    (StudyRun, recorder)
+        ``details`` holds the grid size and spacing, the grid's best f and x, the best f
+        polished from the grid alone and from each extra start.
+    """
+    t0 = time.perf_counter()
+    grid = grid_designs(n_vars, points)
+    f_grid, g_grid = [], []
+    for k in range(0, len(grid), GRID_BATCH):
+        res = run_scenario(scenario, grid[k : k + GRID_BATCH], n_vars=n_vars)
+        f_grid.append(np.asarray(res.f, float))
+        g_grid.append(np.asarray(res.g, float))
+    f_grid, g_grid = np.concatenate(f_grid), np.vstack(g_grid)
+    feasible = np.max(g_grid, axis=1) <= gtol
+    if not feasible.any():
+        raise ValueError(f'{scenario}, {n_vars} variables: no feasible grid point')
+    order = np.argsort(np.where(feasible, f_grid, np.inf))
+    model = FullModelCache(scenario, n_vars)
+    for x, f, g in zip(grid, f_grid, g_grid):  # the grid's runs, counted once
+        model.values[validate_design(x, n_vars)[0].tobytes()] = (float(f), g.copy())
+    best_x, best_f = grid[order[0]].copy(), float(f_grid[order[0]])
+    recorder = _Recorder(record)
+    history: list[dict[str, Any]] = []
+
+    def add(x: Array) -> None:
+        f, g = model(x)
+        rec = {
+            'iteration': len(history),
+            'x': x,
+            'f': f,
+            'g': g,
+            'rho': 0.0,
+            'rho_next': 0.0,
+            'max_violation': max_violation(g),
+        }
+        counter = RunCounter(full_runs=model.n_runs)
+        history.append(_history_entry(rec, counter))
+        recorder.add(rec, counter)
+
+    add(best_x)
+    starts = [('grid', grid[i]) for i in order[:POLISH_STARTS] if feasible[i]]
+    starts += [('method', np.asarray(x, float)) for x in extra_starts]
+    polished: dict[str, list[float]] = {'grid': [], 'method': []}
+    for origin, x0 in starts:
+        res = _slsqp(model, np.asarray(x0, float))
+        f, g = model(res.x)
+        ok = max_violation(g) <= gtol
+        polished[origin].append(f if ok else math.inf)
+        if ok and f < best_f:
+            best_x, best_f = np.asarray(res.x, float).copy(), f
+            add(best_x)
+    wall = time.perf_counter() - t0
+    f, g = model(best_x)
+    spacing = (X_UPPER - X_LOWER) / (points - 1)
+    run = StudyRun(
+        scenario=scenario,
+        n_vars=n_vars,
+        start='-',
+        method='reference',
+        calibration_samples=0,
+        x=best_x.tolist(),
+        f=f,
+        g=g.tolist(),
+        max_violation=max_violation(g),
+        iterations=len(history) - 1,
+        n_full_runs=model.n_runs,
+        n_simplified_runs=0,
+        n_calibration_runs=0,
+        wall_time_s=wall,
+        success=True,
+        message=f'grid {points}^{n_vars} + SLSQP polish from {len(starts)} starts',
+        history=history,
+        details={
+            'grid_points_per_axis': points,
+            'grid_runs': len(grid),
+            'grid_spacing': spacing,
+            'grid_best_f': float(f_grid[order[0]]),
+            'grid_best_x': grid[order[0]].tolist(),
+            'polished_from_grid_best_f': min(polished['grid'], default=math.inf),
+            'polished_from_methods_best_f': min(polished['method'], default=math.inf),
+            'gtol': gtol,
+        },
+    )
+    return run, recorder
+
+
+# ---------------------------------------------------------------------- bags
+def run_config(run: StudyRun) -> dict[str, Any]:
+    """The run's configuration as the coordinator publishes it (plus the method)."""
+    return {
+        'scenario': run.scenario,
+        'n_vars': run.n_vars,
+        'x0': (start_point(run.start, run.n_vars).tolist() if run.start in STARTS else []),
+        'start': run.start,
+        'method': run.method,
+        'method_label': METHOD_LABELS[run.method],
+        'gradient_source': {'dq_simplified': 'simplified', 'dq_full': 'full'}.get(
+            run.method, 'full'
+        ),
+        'calibration_samples': run.calibration_samples,
+        **run.details,
+        'started_unix_s': time.time(),
+    }
+
+
+def write_bag(path: Path, run: StudyRun, recorder: _Recorder) -> Path:
+    """Record one run as a rosbag2-style bag, as the graph's recorder would.
+
+    Topics ``/optimisation/run_config`` (std_msgs/String, YAML), ``/optimisation/progress``
+    (IterationRecord per iteration) and ``/optimisation/result`` (Optimise_Result); the
+    run_config YAML is also the bag's ``run_config`` metadata record.
+    """
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning.bag.recorder import run_config_metadata
+    from suspension_tuning.bag.writer import BagWriter, qos_profile_dict
+    from suspension_tuning.nodes.coordinator import code_version
+
+    files = {p.name: yaml.safe_load(p.read_text()) for p in sorted(config_dir().glob('*.yaml'))}
+    text = yaml.safe_dump(run_config(run), sort_keys=False) + yaml.safe_dump(
+        {'vehicle_configuration': files, 'code_version': code_version()}, sort_keys=False
+    )
+    latched = qos_profile_dict(durability='transient_local', depth=1)
+    reliable = qos_profile_dict(depth=100)
+    physical = physical_settings(run.x)
+    result = Optimise.Result(
+        success=run.success,
+        message=run.message,
+        x=list(run.x),
+        f=run.f,
+        g=list(run.g),
+        physical_names=list(physical),
+        physical_values=list(physical.values()),
+        iterations=run.iterations,
+        n_full_runs=run.n_full_runs,
+        n_simplified_runs=run.n_simplified_runs,
+        n_calibration_runs=run.n_calibration_runs,
+        history=[m for _, m in recorder.messages],
+        wall_time_s=run.wall_time_s,
+    )
+    if path.exists():
+        shutil.rmtree(path)  # this study's own earlier bag of the same run
+    first = recorder.messages[0][0] if recorder.messages else time.time_ns()
+    last = recorder.messages[-1][0] if recorder.messages else first
+    with BagWriter(path) as bag:
+        bag.add_topic('/optimisation/run_config', 'std_msgs/msg/String', [latched])
+        bag.add_topic(
+            '/optimisation/progress',
+            'suspension_tuning_interfaces/msg/IterationRecord',
+            [reliable],
+        )
+        bag.add_topic(
+            '/optimisation/result',
+            'suspension_tuning_interfaces/action/Optimise_Result',
+            [latched],
+        )
+        bag.write('/optimisation/run_config', serialize_message(String(data=text)), first - 1)
+        bag.add_metadata('run_config', run_config_metadata(text))
+        for stamp, msg in recorder.messages:
+            bag.write('/optimisation/progress', serialize_message(msg), stamp)
+        bag.write('/optimisation/result', serialize_message(result), last + 1)
+    return path
+
+
+# ---------------------------------------------------------------------- study
+def compare_to_reference(runs: Sequence[StudyRun], reference: StudyRun) -> None:
+    """Fill each run's distance and objective gap to the reference optimum."""
+    x_ref = np.asarray(reference.x)
+    for run in runs:
+        run.distance_to_reference = float(np.linalg.norm(np.asarray(run.x) - x_ref))
+        run.gap_to_reference_pct = 100.0 * (run.f - reference.f) / abs(reference.f)
+
+
+def run_case(
+    scenario: str,
+    n_vars: int,
+    starts: Sequence[str] = STARTS,
+    calibration_samples: Sequence[int] = CALIBRATION_SAMPLES,
+    grid_points: int | None = None,
+    bags_dir: Path | None = None,
+    log: Callable[[str], None] = print,
+) -> dict[str, Any]:
+    """All methods on one scenario and number of variables, from every start point.
+
+    Returns
+    -------
+    dict
+        ``runs`` (list of StudyRun, reference last), ``reference``, ``baseline_f``,
+        ``baseline_x``.
+    """
+    grid_points = GRID_POINTS[n_vars] if grid_points is None else grid_points
+    record = bags_dir is not None
+    runs: list[tuple[StudyRun, _Recorder]] = []
+    for samples in calibration_samples:
+        t0 = time.perf_counter()
+        scaling = calibrate(scenario, n_vars, n_samples=samples)
+        cal_wall = time.perf_counter() - t0
+        gradient = SimplifiedGradient(scenario, n_vars, scaling, FD_STEP)
+        for start in starts:
+            runs.append(
+                run_dynamic_q(
+                    scenario,
+                    n_vars,
+                    start,
+                    'simplified',
+                    gradient,
+                    samples,
+                    cal_wall,
+                    record=record,
+                )
+            )
+    for start in starts:
+        runs.append(run_dynamic_q(scenario, n_vars, start, 'full', record=record))
+    for start in starts:
+        runs.append(run_slsqp(scenario, n_vars, start, record=record))
+    for run, _ in runs:
+        log(
+            f'  {run.name}: f = {run.f:.6f}, {run.iterations} iterations, '
+            f'{run.n_full_runs} full + {run.n_calibration_runs} calibration runs, '
+            f'{run.wall_time_s:.1f} s'
+        )
+    reference, ref_recorder = reference_optimum(
+        scenario, n_vars, grid_points, [r.x for r, _ in runs], record=record
+    )
+    log(
+        f'  {scenario}_{n_vars}var reference: f = {reference.f:.6f} '
+        f'({reference.message}, {reference.n_full_runs} full runs, '
+        f'{reference.wall_time_s:.1f} s)'
+    )
+    runs.append((reference, ref_recorder))
+    compare_to_reference([r for r, _ in runs], reference)
+    if bags_dir is not None:
+        for run, recorder in runs:
+            run.bag = str(write_bag(bags_dir / run.name, run, recorder))
+    x_base = start_point('baseline', n_vars)
+    base = run_scenario(scenario, x_base[None, :], n_vars=n_vars)
+    return {
+        'runs': [r for r, _ in runs],
+        'reference': reference,
+        'baseline_f': float(base.f[0]),
+        'baseline_x': x_base.tolist(),
+    }
+
+
+def cost_ratios(case: dict[str, Any], calibration_samples: int) -> dict[str, float]:
+    """SLSQP and full-gradient Dynamic-Q full runs over simplified-gradient Dynamic-Q's.
+
+    Totals over the start points of the case; the calibration is counted once per run.
+    """
+    runs = case['runs']
+    simp = [
+        r
+        for r in runs
+        if r.method == 'dq_simplified' and r.calibration_samples == calibration_samples
+    ]
+    slsqp = [r for r in runs if r.method == 'slsqp']
+    dq_full = [r for r in runs if r.method == 'dq_full']
+    n_simp = sum(r.n_full_runs for r in simp)
+    n_simp_cal = sum(r.full_runs_with_calibration for r in simp)
+    n_slsqp = sum(r.n_full_runs for r in slsqp)
+    worst_simp = max(r.f for r in simp)
+    best_slsqp = min(r.f for r in slsqp)
+    return {
+        'full_runs_ratio_vs_slsqp': n_slsqp / n_simp,
+        'full_runs_ratio_vs_slsqp_with_calibration': n_slsqp / n_simp_cal,
+        'full_runs_ratio_vs_dq_full': sum(r.n_full_runs for r in dq_full) / n_simp,
+        'full_runs_ratio_vs_dq_full_with_calibration': sum(r.n_full_runs for r in dq_full)
+        / n_simp_cal,
+        'objective_gap_vs_slsqp_pct': 100.0 * (worst_simp - best_slsqp) / abs(best_slsqp),
+        'optimum_gap_pct': max(r.gap_to_reference_pct for r in simp),
+    }
+
+
+# ---------------------------------------------------------------------- outputs
+def _fmt(value: float, digits: int = 4) -> str:
+    return f'{value:.{digits}f}' if math.isfinite(value) else '-'
+
+
+def markdown_tables(cases: Sequence[dict[str, Any]], calibration_samples: Sequence[int]) -> str:
+    """The study's Markdown: the run table, settings against baseline, cost ratios."""
+    lines = [
+        '| scenario | n | start | method | cal. N | f | max viol. | dist. to ref. '
+        '| f gap to ref. % | iter. | full runs | simpl. runs | calib. runs '
+        '| full runs incl. calib. | wall s (calib. s) |',
+        '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|',
+    ]
+    for case in cases:
+        for r in case['runs']:
+            cal = str(r.calibration_samples) if r.method == 'dq_simplified' else '-'
+            wall = f'{r.wall_time_s:.1f}'
+            iters = '-' if r.method == 'reference' else str(r.iterations)
+            if r.method == 'dq_simplified':
+                wall += f' ({r.calibration_wall_time_s:.1f})'
+            lines.append(
+                f'| {r.scenario} | {r.n_vars} | {r.start} | {r.method} | {cal} | '
+                f'{r.f:.5f} | {r.max_violation:.3g} | {r.distance_to_reference:.3f} | '
+                f'{r.gap_to_reference_pct:+.3f} | {iters} | {r.n_full_runs} | '
+                f'{r.n_simplified_runs} | {r.n_calibration_runs} | '
+                f'{r.full_runs_with_calibration} | {wall} |'
+            )
+    lines += [
+        '',
+        '**Optimum settings against the baseline vehicle** (physical units; '
+        'improvement = (f_baseline - f) / |f_baseline|)',
+        '',
+        '| scenario | n | design | dpsf front | gas front (L) | dpsf rear | gas rear (L) '
+        '| f | improvement % |',
+        '|---|---|---|---|---|---|---|---|---|',
+    ]
+    for case in cases:
+        ref = case['reference']
+        base_f = case['baseline_f']
+        rows = [('baseline', case['baseline_x'], base_f), ('reference', ref.x, ref.f)]
+        rows += [
+            (f'{r.method} ({r.start}, N={r.calibration_samples})', r.x, r.f)
+            for r in case['runs']
+            if r.method == 'dq_simplified' and r.calibration_samples == calibration_samples[0]
+        ]
+        for label, x, f in rows:
+            p = physical_settings(x)
+            imp = 100.0 * (base_f - f) / abs(base_f)
+            lines.append(
+                f'| {ref.scenario} | {ref.n_vars} | {label} | {p["dpsf_front"]:.3f} | '
+                f'{p["gas_volume_front_l"]:.3f} | {p["dpsf_rear"]:.3f} | '
+                f'{p["gas_volume_rear_l"]:.3f} | {f:.5f} | {imp:+.2f} |'
+            )
+    lines += [
+        '',
+        '**Full-model runs: SLSQP and full-gradient Dynamic-Q over '
+        'simplified-gradient Dynamic-Q** (totals over the start points; calibration '
+        'counted once per run)',
+        '',
+        '| scenario | n | cal. N | vs SLSQP | vs SLSQP incl. calib. | vs DQ full '
+        '| vs DQ full incl. calib. | f gap vs best SLSQP % | f gap vs ref. % |',
+        '|---|---|---|---|---|---|---|---|---|',
+    ]
+    for case in cases:
+        ref = case['reference']
+        for samples in calibration_samples:
+            c = cost_ratios(case, samples)
+            lines.append(
+                f'| {ref.scenario} | {ref.n_vars} | {samples} | '
+                f'{c["full_runs_ratio_vs_slsqp"]:.2f} | '
+                f'{c["full_runs_ratio_vs_slsqp_with_calibration"]:.2f} | '
+                f'{c["full_runs_ratio_vs_dq_full"]:.2f} | '
+                f'{c["full_runs_ratio_vs_dq_full_with_calibration"]:.2f} | '
+                f'{c["objective_gap_vs_slsqp_pct"]:+.3f} | {c["optimum_gap_pct"]:+.3f} |'
+            )
+    lines += ['', '**Reference optima**', '']
+    for case in cases:
+        ref = case['reference']
+        d = ref.details
+        lines.append(
+            f'- {ref.scenario}, n = {ref.n_vars}: grid {d["grid_points_per_axis"]}^{ref.n_vars} '
+            f'({d["grid_runs"]} full runs, spacing {d["grid_spacing"]:.4f}) best f = '
+            f'{d["grid_best_f"]:.5f}; SLSQP polish from the {POLISH_STARTS} best grid points '
+            f"best f = {_fmt(d['polished_from_grid_best_f'], 5)}, from the methods' final "
+            f'points {_fmt(d["polished_from_methods_best_f"], 5)}; reference f = {ref.f:.5f} '
+            f'at x = {np.round(ref.x, 3).tolist()} ({ref.wall_time_s:.1f} s).'
+        )
+    return '\n'.join(lines) + '\n'
+
+
+def plot_case(case: dict[str, Any], start: str, path: Path) -> Path:
+    """f against full-model runs per method (left: optimisation; right: incl. calibration)."""
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    ref = case['reference']
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True)
+    styles = {'dq_simplified': '-o', 'dq_full': '-s', 'slsqp': '-^'}
+    for ax, with_cal in zip(axes, (False, True)):
+        for r in case['runs']:
+            if r.start != start or r.method not in styles:
+                continue
+            offset = r.n_calibration_runs if with_cal else 0
+            runs = [h['n_full_runs'] + offset for h in r.history]
+            label = METHOD_LABELS[r.method]
+            if r.method == 'dq_simplified':
+                label += f' (N = {r.calibration_samples})'
+            ax.plot(runs, [h['f'] for h in r.history], styles[r.method], ms=3, label=label)
+        ax.axhline(ref.f, color='k', ls='--', lw=0.8, label=f'reference f = {ref.f:.5f}')
+        ax.set_xlabel('full-model runs' + (' incl. eq. 25 calibration' if with_cal else ''))
+        ax.grid(True, alpha=0.3)
+    axes[0].set_ylabel('objective f (full model)')
+    axes[0].legend(fontsize=7)
+    eq = 'eq. 9' if ref.scenario == 'ride' else 'eq. 10'
+    fig.suptitle(f'{ref.scenario} ({eq}), {ref.n_vars} variables, start: {start}')
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def run_study(
+    out: Path,
+    scenarios: Sequence[str] = SCENARIOS,
+    n_vars_list: Sequence[int] = N_VARS,
+    starts: Sequence[str] = STARTS,
+    calibration_samples: Sequence[int] = CALIBRATION_SAMPLES,
+    grid_points: dict[int, int] | None = None,
+    bags: bool = True,
+    log: Callable[[str], None] = print,
+) -> dict[str, Any]:
+    """Run every case, write the tables, plots, JSON and bags under ``out``.
+
+    Returns
+    -------
+    dict
+        ``cases`` (as :func:`run_case`), ``markdown``, ``plots``, ``wall_time_s``.
+    """
+    for s in scenarios:
+        if s not in SCENARIOS:
+            raise ValueError(f'unknown scenario {s!r}; valid: {", ".join(SCENARIOS)}')
+    for n in n_vars_list:
+        if n not in N_VARS:
+            raise ValueError(f'n_vars must be 2 or 4, got {n}')
+    for s in starts:
+        start_point(s, 2)
+    if not calibration_samples or min(calibration_samples) < 2:
+        raise ValueError(f'calibration sample counts must be >= 2, got {calibration_samples}')
+    grid_points = {**GRID_POINTS, **(grid_points or {})}
+    t0 = time.perf_counter()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for s in scenarios:  # numba compile / cache load outside every timed run
+        run_scenario(s, centre(2)[None, :], n_vars=2)
+    cases, plots = [], []
+    for scenario in scenarios:
+        for n in n_vars_list:
+            log(f'== {scenario}, {n} variables')
+            case = run_case(
+                scenario,
+                n,
+                starts,
+                calibration_samples,
+                grid_points[n],
+                out / 'bags' if bags else None,
+                log,
+            )
+            cases.append(case)
+            for start in starts:
+                plots.append(
+                    plot_case(case, start, out / 'plots' / f'{scenario}_{n}var_{start}.png')
+                )
+    wall = time.perf_counter() - t0
+    text = (
+        f'# Method study: simplified-model gradients against full-model gradients\n\n'
+        f'Generated by `study` in {wall:.0f} s.\n\n' + markdown_tables(cases, calibration_samples)
+    )
+    (out / 'method_study.md').write_text(text)
+    payload = {
+        'wall_time_s': wall,
+        'cases': [
+            {
+                'scenario': c['reference'].scenario,
+                'n_vars': c['reference'].n_vars,
+                'baseline_f': c['baseline_f'],
+                'baseline_x': c['baseline_x'],
+                'ratios': {str(s): cost_ratios(c, s) for s in calibration_samples},
+                'runs': [{**asdict(r), 'name': r.name} for r in c['runs']],
+            }
+            for c in cases
+        ],
+    }
+    (out / 'results.json').write_text(json.dumps(payload, indent=1, default=float))
+    return {'cases': cases, 'markdown': text, 'plots': plots, 'wall_time_s': wall}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Command line: run the study, print the table and where the outputs are."""
+    parser = argparse.ArgumentParser(prog='study', description=__doc__.split('\n')[0])
+    parser.add_argument('--out', default='out/study', help='output folder (default out/study)')
+    parser.add_argument('--scenarios', nargs='+', default=list(SCENARIOS), choices=SCENARIOS)
+    parser.add_argument('--n-vars', nargs='+', type=int, default=list(N_VARS), choices=N_VARS)
+    parser.add_argument('--starts', nargs='+', default=list(STARTS), choices=STARTS)
+    parser.add_argument(
+        '--calibration-samples',
+        nargs='+',
+        type=int,
+        default=list(CALIBRATION_SAMPLES),
+        help='eq. 25 sample counts of the simplified-gradient runs '
+        '(the first one is used in the settings table)',
+    )
+    parser.add_argument(
+        '--grid-2',
+        type=int,
+        default=None,
+        help=f'reference grid points per axis, 2 variables (default {GRID_POINTS[2]})',
+    )
+    parser.add_argument(
+        '--grid-4',
+        type=int,
+        default=None,
+        help=f'reference grid points per axis, 4 variables (default {GRID_POINTS[4]})',
+    )
+    parser.add_argument(
+        '--quick',
+        action='store_true',
+        help=f'coarse reference grids ({QUICK_GRID_POINTS[2]} and '
+        f'{QUICK_GRID_POINTS[4]} per axis): a smoke run',
+    )
+    parser.add_argument('--no-bags', action='store_true', help='do not record bags')
+    args = parser.parse_args(argv)
+    grid = dict(QUICK_GRID_POINTS if args.quick else GRID_POINTS)
+    if args.grid_2 is not None:
+        grid[2] = args.grid_2
+    if args.grid_4 is not None:
+        grid[4] = args.grid_4
+    try:
+        study = run_study(
+            Path(args.out),
+            args.scenarios,
+            args.n_vars,
+            args.starts,
+            args.calibration_samples,
+            grid,
+            bags=not args.no_bags,
+            log=lambda s: print(s, flush=True),
+        )
+    except ValueError as error:
+        print(f'study: {error}', file=sys.stderr)
+        return 2
+    print()
+    print(study['markdown'])
+    out = Path(args.out)
+    print(f'table: {out / "method_study.md"}')
+    print(f'results: {out / "results.json"}')
+    print(f'plots: {", ".join(str(p) for p in study["plots"])}')
+    if not args.no_bags:
+        print(f'bags: {out / "bags"} (inspect: inspect_bag <bag>)')
+    print(f'study_wall_time_s: {study["wall_time_s"]:.1f}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
