@@ -117,6 +117,11 @@ def main() -> int:
     print(f'in_process_wall_s: {local_s:.3f}')
     print(f'graph_wall_s: {graph_s:.3f}')
     print(f'repeats_best_of: {REPEATS}')
+    # Round trips: one evaluate per iteration (n_full_runs), one gradient call per 2n
+    # simplified runs, the calibration call and its batch of full-model samples.
+    trips = (graph_result.n_full_runs + graph_result.n_simplified_runs // (2 * N_VARS) + 2)
+    print(f'service_round_trips: {trips}')
+    print(f'overhead_per_round_trip_ms: {(graph_s - local_s) / trips * 1e3:.2f}')
     print(f'ros_overhead_fraction: {graph_s / local_s - 1.0:.4f}')
     return 0 if same else 1
 
