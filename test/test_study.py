@@ -1,0 +1,171 @@
+"""Method study (issue 9): run counts add up, the reference is the best, bags reopen.
+
+One quick case: handling, 2 variables, both start points, one calibration of 16 samples,
+an 11 x 11 reference grid.  The handling optimum lies at the corner (dpsf = 3,
+gas = 0.1 L: x = (1, 0.001), the stiffest car rolls least, eq. 10) which is a grid point,
+so the grid alone must find it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from suspension_tuning.bag.reader import read_messages
+from suspension_tuning.inspect_bag import summary
+from suspension_tuning.study import (
+    StudyRun,
+    cost_ratios,
+    grid_designs,
+    main,
+    markdown_tables,
+    run_case,
+    run_study,
+    start_point,
+)
+from suspension_tuning.vehicle.design import X_LOWER, X_UPPER
+
+N = 2  # design variables of the quick case (eq. 5)
+SAMPLES = 16  # eq. 25 calibration samples: 4 corners + 12 LHS points for n = 2
+GRID = 11  # reference grid points per axis: spacing 0.0999, corners included
+
+
+@pytest.fixture(scope='module')
+def case(tmp_path_factory):
+    bags = tmp_path_factory.mktemp('study') / 'bags'
+    return run_case(
+        'handling', N, ('centre', 'baseline'), (SAMPLES,), GRID, bags, log=lambda _: None
+    )
+
+
+def runs_of(case, method: str) -> list[StudyRun]:
+    return [r for r in case['runs'] if r.method == method]
+
+
+def test_every_method_runs_from_both_start_points(case):
+    names = sorted(r.name for r in case['runs'])
+    assert names == sorted(
+        [
+            'handling_2var_centre_dq_simplified_cal16',
+            'handling_2var_baseline_dq_simplified_cal16',
+            'handling_2var_centre_dq_full',
+            'handling_2var_baseline_dq_full',
+            'handling_2var_centre_slsqp',
+            'handling_2var_baseline_slsqp',
+            'handling_2var_-_reference',
+        ]
+    )
+
+
+def test_simplified_gradient_runs_cost_one_full_run_per_iteration(case):
+    for r in runs_of(case, 'dq_simplified'):
+        # Section 2: one full run per iterate (the start plus one per iteration) and 2n
+        # simplified runs per gradient (one gradient per iteration).
+        assert r.n_full_runs == r.iterations + 1
+        assert r.n_simplified_runs == 2 * N * r.iterations
+        assert r.n_calibration_runs == SAMPLES
+        assert r.full_runs_with_calibration == r.n_full_runs + SAMPLES
+        assert r.history[-1]['n_full_runs'] == r.n_full_runs
+
+
+def test_full_gradient_runs_cost_two_n_plus_one_full_runs_per_iteration(case):
+    for r in runs_of(case, 'dq_full'):
+        # Section 2: "2n + 1 full simulations per iteration" (+ 1 for the start point).
+        assert r.n_full_runs == r.iterations + 1 + 2 * N * r.iterations
+        assert r.n_simplified_runs == 0 and r.n_calibration_runs == 0
+
+
+def test_slsqp_pays_at_least_n_plus_one_full_runs_per_iteration(case):
+    for r in runs_of(case, 'slsqp'):
+        # 2-point forward differences: n runs per gradient plus >= 1 run per iteration.
+        assert r.n_full_runs >= (N + 1) * r.iterations
+        counts = [h['n_full_runs'] for h in r.history]
+        assert counts == sorted(counts) and counts[-1] <= r.n_full_runs
+
+
+def test_reference_is_no_worse_than_any_run(case):
+    ref = case['reference']
+    assert ref.n_full_runs >= GRID**N  # the grid's runs are counted
+    for r in case['runs']:
+        # The reference polishes from every method's final point: never worse (1e-12
+        # relative: identical designs give identical bits, the model is deterministic).
+        assert ref.f <= r.f + 1e-12 * abs(r.f)
+        assert r.max_violation == 0.0  # eq. 11: no tyre lifts off in the lane change
+    best_run = min(r.f for r in case['runs'] if r.method != 'reference')
+    # The optimum is the grid corner x = (1, 0.001): the grid alone finds it exactly.
+    assert ref.details['grid_best_x'] == [X_UPPER, X_LOWER]
+    assert ref.details['grid_best_f'] == pytest.approx(best_run, rel=1e-6)
+    np.testing.assert_allclose(ref.x, [X_UPPER, X_LOWER], atol=1e-6)
+
+
+def test_distances_and_gaps_are_measured_against_the_reference(case):
+    ref = case['reference']
+    for r in case['runs']:
+        assert r.distance_to_reference == pytest.approx(
+            np.linalg.norm(np.subtract(r.x, ref.x)), abs=1e-12
+        )
+        assert r.gap_to_reference_pct == pytest.approx(100 * (r.f - ref.f) / abs(ref.f))
+        # Every method reaches the corner optimum within the xtol of 1e-3 (optimiser.yaml).
+        assert r.distance_to_reference < 1e-3
+
+
+def test_cost_ratios_are_totals_over_the_start_points(case):
+    ratios = cost_ratios(case, SAMPLES)
+    simp = runs_of(case, 'dq_simplified')
+    slsqp = sum(r.n_full_runs for r in runs_of(case, 'slsqp'))
+    assert ratios['full_runs_ratio_vs_slsqp'] == pytest.approx(
+        slsqp / sum(r.n_full_runs for r in simp)
+    )
+    assert ratios['full_runs_ratio_vs_slsqp_with_calibration'] == pytest.approx(
+        slsqp / sum(r.n_full_runs + SAMPLES for r in simp)
+    )
+    table = markdown_tables([case], (SAMPLES,))
+    for r in case['runs']:
+        assert f'| {r.f:.5f} |' in table
+
+
+def test_bags_reopen_and_report_the_same_optimum(case):
+    for r in case['runs']:
+        contents = read_messages(r.bag)
+        assert contents.complete
+        assert contents.counts()['/optimisation/progress'] == len(r.history)
+        info = summary(r.bag)
+        opt = info['optimum']
+        assert opt['f'] == r.f and opt['x'] == r.x
+        assert opt['iterations'] == r.iterations
+        assert info['evaluations']['n_full_runs'] == r.n_full_runs
+        assert info['evaluations']['n_calibration_runs'] == r.n_calibration_runs
+        assert info['run_config']['method'] == r.method
+        assert [it['f'] for it in info['iterations']] == [h['f'] for h in r.history]
+
+
+def test_grid_spans_the_bounds():
+    grid = grid_designs(2, 3)
+    assert grid.shape == (9, 2)  # 3^2 designs
+    assert grid.min() == X_LOWER and grid.max() == X_UPPER
+
+
+def test_start_points_are_centre_and_baseline():
+    np.testing.assert_allclose(start_point('centre', 4), 0.5005)  # (0.001 + 1) / 2
+    # Baseline 0.3 L, dpsf 1 (config/scenarios.yaml): (1 - 0.1) / 2.9 and (0.3 - 0.1) / 0.5.
+    np.testing.assert_allclose(start_point('baseline', 2), [0.9 / 2.9, 0.4])
+
+
+@pytest.mark.parametrize(
+    'kwargs, message',
+    [
+        ({'scenarios': ('mixed',)}, 'unknown scenario'),
+        ({'n_vars_list': (3,)}, 'n_vars must be 2 or 4'),
+        ({'starts': ('corner',)}, 'unknown start point'),
+        ({'calibration_samples': (1,)}, 'calibration sample counts'),
+    ],
+)
+def test_bad_study_arguments_raise_value_error(tmp_path, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        run_study(tmp_path, **kwargs)
+
+
+def test_cli_rejects_an_unknown_scenario(capsys):
+    with pytest.raises(SystemExit):
+        main(['--scenarios', 'mixed'])
+    assert 'invalid choice' in capsys.readouterr().err
