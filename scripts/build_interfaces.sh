@@ -9,6 +9,7 @@ set -euo pipefail
 venv=$(cd "$1" && pwd)
 build=${2:-build/interfaces}
 here=$(cd "$(dirname "$0")/.." && pwd)
+mkdir -p "$build"
 export PATH="$venv/bin:$PATH"
 export CMAKE_PREFIX_PATH="$venv"
 export AMENT_PREFIX_PATH="$venv"
