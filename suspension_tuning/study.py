@@ -164,7 +164,9 @@ class StudyRun:
 
     @property
     def name(self) -> str:
-        """``<scenario>_<n>var_<start>_<method>[_cal<N>]`` (bag and plot names)."""
+        """``<scenario>_<n>var_<start>_<method>[_cal<N>]`` or ``..._reference`` (bag names)."""
+        if self.method == 'reference':
+            return f'{self.scenario}_{self.n_vars}var_reference'
         tail = f'_cal{self.calibration_samples}' if self.method == 'dq_simplified' else ''
         return f'{self.scenario}_{self.n_vars}var_{self.start}_{self.method}{tail}'
 

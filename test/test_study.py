@@ -52,7 +52,7 @@ def test_every_method_runs_from_both_start_points(case):
             'handling_2var_baseline_dq_full',
             'handling_2var_centre_slsqp',
             'handling_2var_baseline_slsqp',
-            'handling_2var_-_reference',
+            'handling_2var_reference',
         ]
     )
 
