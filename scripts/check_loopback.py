@@ -47,7 +47,7 @@ def trace(command: list[str]) -> tuple[int, collections.Counter]:
         sys.exit(2)
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / 'trace.txt'
-        result = subprocess.run(['strace', '-f', '-qq', '-e',
+        result = subprocess.run(['strace', '-f', '-qq', '--seccomp-bpf', '-e',
                                  'trace=sendto,sendmsg,sendmmsg,connect',
                                  '-o', str(log), *command], check=False)
         return result.returncode, destinations(log.read_text())
