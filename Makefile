@@ -21,7 +21,7 @@ export AMENT_PREFIX_PATH := $(abspath $(VENV))
 INTERFACE_FILES := $(shell find suspension_tuning_interfaces -type f)
 PIP_QUIET := 2>&1 | { grep -v -e 'is ignored: it is neither' -e '^$$' || true; }
 
-.PHONY: setup test lint demo bench clean
+.PHONY: setup test lint demo bench study clean
 
 setup: $(STAMPS)/package
 
@@ -52,6 +52,9 @@ test: lint
 
 demo: setup
 	$(PY) -m suspension_tuning.demo
+
+study: setup
+	$(PY) -m suspension_tuning.study --out out/study
 
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b; done

@@ -18,6 +18,7 @@ CONSOLE_SCRIPTS = [
     'inspect_bag = suspension_tuning.inspect_bag:main',
     'graph = suspension_tuning.graph:main',
     'tune = suspension_tuning.tune:main',
+    'study = suspension_tuning.study:main',
 ]
 
 setup(
