@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -35,15 +34,6 @@ def baseline_design(n_vars: int) -> np.ndarray:
     settings = AxleSettings(*(np.array([v]) for v in (float(base['dpsf']), gas,
                                                        float(base['dpsf']), gas)))
     return from_physical(settings, n_vars)[0]
-
-
-def wait(future, timeout_s: float | None = None):
-    """Wait for an rclpy future completed by the spinning thread."""
-    done = threading.Event()
-    future.add_done_callback(lambda _: done.set())
-    if not done.wait(timeout_s):
-        raise TimeoutError('the graph did not answer in time')
-    return future.result()
 
 
 def report(scenario: str, result, baseline_f: float, baseline_x: np.ndarray) -> str:
@@ -83,6 +73,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from suspension_tuning.graph import SpinningGraph, build_nodes
     from suspension_tuning.inspect_bag import write_plots
+    from suspension_tuning.nodes._service_calls import wait_future
     from suspension_tuning.tune import format_feedback
 
     rclpy.init()
@@ -104,17 +95,17 @@ def main(argv: list[str] | None = None) -> int:
         outputs = []
         for scenario in args.scenarios:
             x_base = baseline_design(args.n_vars)
-            base = wait(evaluate.call_async(EvaluateDesign.Request(
+            base = wait_future(evaluate.call_async(EvaluateDesign.Request(
                 scenario=scenario, n_vars=args.n_vars, designs=x_base.tolist())), 600)
             print(f'\n== {scenario}: {args.n_vars} variables, simplified-model gradients '
                   f'(baseline f = {base.f[0]:.4f})', flush=True)
             closed_before = len(recorder.session.closed_bags)
-            handle = wait(action.send_goal_async(
+            handle = wait_future(action.send_goal_async(
                 Optimise.Goal(scenario=scenario, n_vars=args.n_vars,
                               gradient_source='simplified'),
                 feedback_callback=lambda fb: print('  ' + format_feedback(fb.feedback.latest),
                                                    flush=True)), 60)
-            result = wait(handle.get_result_async()).result
+            result = wait_future(handle.get_result_async()).result
             status |= 0 if result.success else 1
             deadline = time.monotonic() + 30
             while len(recorder.session.closed_bags) == closed_before:

@@ -21,6 +21,8 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from suspension_tuning_interfaces.action import Optimise
 
+from suspension_tuning.nodes._service_calls import wait_future
+
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
     """Parse the command-line options of ``tune``."""
@@ -61,15 +63,6 @@ def format_result(result) -> str:
     return '\n'.join(lines)
 
 
-def wait(future, timeout_s: float | None = None):
-    """Wait for an rclpy future spun by another thread; return its result."""
-    done = threading.Event()
-    future.add_done_callback(lambda _: done.set())
-    if not done.wait(timeout_s):
-        raise TimeoutError('no answer from the coordinator')
-    return future.result()
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``ros2 run suspension_tuning tune``."""
     args_list = sys.argv[1:] if argv is None else argv
@@ -91,17 +84,17 @@ def main(argv: list[str] | None = None) -> int:
         goal = Optimise.Goal(scenario=args.scenario, n_vars=args.n_vars, x0=args.x0,
                              gradient_source=args.gradient,
                              max_iterations=args.max_iterations, move_limit=args.move_limit)
-        handle = wait(client.send_goal_async(
+        handle = wait_future(client.send_goal_async(
             goal, feedback_callback=lambda fb: print(format_feedback(fb.feedback.latest),
                                                      flush=True)), args.server_timeout)
         if handle is None or not handle.accepted:
             print('error: goal rejected', file=sys.stderr)
             return 2
         try:
-            result = wait(handle.get_result_async()).result
+            result = wait_future(handle.get_result_async()).result
         except KeyboardInterrupt:
             print('cancelling ...', file=sys.stderr)
-            wait(handle.cancel_goal_async(), 10.0)
+            wait_future(handle.cancel_goal_async(), 10.0)
             return 130
         print(format_result(result), flush=True)
         status = 0 if result.success else 1

@@ -24,6 +24,21 @@ class ServiceCallError(RuntimeError):
     """A service did not answer: not available, timed out, or vanished."""
 
 
+def wait_future(future: Any, timeout_s: float | None = None) -> Any:
+    """Wait for an rclpy future completed by an executor in another thread.
+
+    Raises
+    ------
+    TimeoutError
+        No result within ``timeout_s`` seconds (None waits for ever).
+    """
+    done = threading.Event()
+    future.add_done_callback(lambda _: done.set())
+    if not done.wait(timeout_s):
+        raise TimeoutError(f'no answer within {timeout_s} s')
+    return future.result()
+
+
 def call(node: Node, client: Any, request: Any, timeout_s: float,
          wait_for_service_s: float = 5.0) -> Any:
     """Call a service and wait for its response from a non-executor thread.

@@ -22,11 +22,9 @@ import time
 from typing import Any
 
 import numpy as np
-import rclpy
 import yaml
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
@@ -35,6 +33,7 @@ from suspension_tuning_interfaces.msg import IterationRecord
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning.nodes._service_calls import ServiceCallError, SimulationPool, call
+from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.dynamic_q import load_options
 from suspension_tuning.paths import config_dir
 from suspension_tuning.tuning import (
@@ -230,17 +229,7 @@ class CoordinatorNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning coordinator``."""
-    rclpy.init(args=args)
-    node = CoordinatorNode()
-    executor = MultiThreadedExecutor()
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(CoordinatorNode, args, multithreaded=True)
 
 
 if __name__ == '__main__':

@@ -30,9 +30,7 @@ import threading
 import time
 
 import numpy as np
-import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_services_default
 from rclpy.service_introspection import ServiceIntrospectionState
@@ -42,6 +40,7 @@ from suspension_tuning_interfaces.msg import TimeHistories, ValveState, VehicleS
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
 from suspension_tuning import evaluation, simplified_inputs
+from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.vehicle.simplified import SimplifiedInputs
 
 CORNERS = ['FL', 'FR', 'RL', 'RR']
@@ -214,17 +213,7 @@ class FullVehicleSimNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning full_vehicle_sim``."""
-    rclpy.init(args=args)
-    node = FullVehicleSimNode()
-    executor = MultiThreadedExecutor()
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(FullVehicleSimNode, args, multithreaded=True)
 
 
 if __name__ == '__main__':

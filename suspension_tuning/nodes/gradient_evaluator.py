@@ -19,9 +19,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-import rclpy
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_services_default
 from rclpy.service_introspection import ServiceIntrospectionState
@@ -29,6 +27,7 @@ from suspension_tuning_interfaces.srv import Calibrate, EvaluateDesign, Evaluate
 
 from suspension_tuning import simplified_inputs
 from suspension_tuning.nodes._service_calls import ServiceCallError, call
+from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.scaling import Scaling, scaling_key
 from suspension_tuning.optim.simplified_gradient import (
     SimplifiedGradient,
@@ -166,17 +165,7 @@ class GradientEvaluatorNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning gradient_evaluator``."""
-    rclpy.init(args=args)
-    node = GradientEvaluatorNode()
-    executor = MultiThreadedExecutor()
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(GradientEvaluatorNode, args, multithreaded=True)
 
 
 if __name__ == '__main__':

@@ -26,10 +26,8 @@ import re
 import threading
 import time
 
-import rclpy
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import (
     DurabilityPolicy,
@@ -45,6 +43,7 @@ from suspension_tuning.bag.definitions import (
 )
 from suspension_tuning.bag.recorder import RecordingSession
 from suspension_tuning.bag.writer import qos_profile_dict
+from suspension_tuning.nodes._spin import run_node
 
 #: Depth of the recorder's subscriptions: deep enough that a burst of telemetry (a 20 s
 #: run at 200 Hz is 4000 samples per topic) waits instead of being overwritten while the
@@ -232,21 +231,10 @@ class RecorderNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning recorder``."""
-    rclpy.init(args=args)
-    node = RecorderNode()
     # Single-threaded: no callback blocks, and rclpy's MultiThreadedExecutor costs more
     # per message (benchmarks/bench_recorder.py, this 2-core machine: 3900-6100 against
     # 1900-2400 messages/s).
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        executor.shutdown(timeout_sec=1.0)
-        rclpy.try_shutdown()
+    run_node(RecorderNode, args, multithreaded=False)
 
 
 if __name__ == '__main__':

@@ -15,12 +15,11 @@ from __future__ import annotations
 
 from dataclasses import asdict, fields
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from suspension_tuning_interfaces.msg import ValveState, VehicleState
 
+from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.vehicle.valve_logic import ValveController, ValveControllerParams
 
 #: Commands and valve states must not be dropped (reliable, keep last 100).
@@ -76,15 +75,7 @@ class ValveControllerNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning valve_controller``."""
-    rclpy.init(args=args)
-    node = ValveControllerNode()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(ValveControllerNode, args, multithreaded=False)
 
 
 if __name__ == '__main__':
