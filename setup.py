@@ -36,6 +36,5 @@ setup(
     maintainer_email='maintainers@suspension-tuning.dev',
     description='Dynamic-Q tuning of the 4S4 suspension of a Land Rover Defender 110.',
     license='Apache-2.0',
-    tests_require=['pytest'],
     entry_points={'console_scripts': CONSOLE_SCRIPTS},
 )

@@ -41,7 +41,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-DEFAULT_CONFIG_PATH = Path(__file__).resolve().parents[2] / 'config' / 'manoeuvre.yaml'
+from suspension_tuning.paths import config_dir
+
+DEFAULT_CONFIG_PATH = config_dir() / 'manoeuvre.yaml'
 """config/manoeuvre.yaml of the source tree."""
 
 SECTION_LENGTHS_M = (15.0, 30.0, 25.0, 25.0, 15.0, 15.0)

@@ -14,7 +14,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-CONFIG_DIR = Path(__file__).resolve().parents[2] / 'config'
+from suspension_tuning.paths import config_dir
+
+CONFIG_DIR = config_dir()
 LITRE_M3 = 1.0e-3
 
 

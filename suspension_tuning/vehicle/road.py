@@ -32,7 +32,9 @@ import numpy as np
 import yaml
 from scipy import special
 
-DEFAULT_CONFIG_PATH = Path(__file__).resolve().parents[2] / 'config' / 'road.yaml'
+from suspension_tuning.paths import config_dir
+
+DEFAULT_CONFIG_PATH = config_dir() / 'road.yaml'
 """config/road.yaml of the source tree."""
 
 COHERENCE_MODELS = ('isotropic', 'identical', 'independent')

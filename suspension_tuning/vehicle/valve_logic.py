@@ -25,6 +25,8 @@ from pathlib import Path
 
 import yaml
 
+from suspension_tuning.paths import config_dir
+
 SPRING_SOFT = 0
 SPRING_STIFF = 1
 DAMPING_LOW = 0
@@ -34,7 +36,7 @@ DAMPING_HIGH = 1
 RIDE_STATE = (SPRING_SOFT, DAMPING_LOW, SPRING_SOFT, DAMPING_LOW)
 HANDLING_STATE = (SPRING_STIFF, DAMPING_HIGH, SPRING_STIFF, DAMPING_HIGH)
 
-DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / 'config' / 'valve_controller.yaml'
+DEFAULT_CONFIG = config_dir() / 'valve_controller.yaml'
 
 
 @dataclass(frozen=True)
