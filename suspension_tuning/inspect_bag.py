@@ -467,6 +467,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.reindex:
             reindex(args.bag)
         info = summary(args.bag)
+        if not info['complete'] and info['message_count'] == 0:
+            raise ValueError(f'{args.bag}: {info["stop_reason"]}: no message could be read')
     except ValueError as exc:
         print(f'inspect_bag: {exc}', file=sys.stderr)
         return 2

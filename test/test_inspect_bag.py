@@ -283,3 +283,12 @@ def test_reindex_option_repairs_a_truncated_bag_before_reporting(bag, tmp_path, 
     # the summary was lost, every chunk was whole: all 290 messages, complete again
     assert info['complete'] and info['message_count'] == 290
     assert (copy / 'metadata.yaml').is_file()
+
+
+def test_inspect_of_an_unreadable_file_says_why(tmp_path, capsys):
+    from suspension_tuning.inspect_bag import main
+
+    garbage = tmp_path / 'garbage.mcap'
+    garbage.write_bytes(b'this is not a bag')
+    assert main([str(garbage)]) == 2
+    assert 'not an MCAP file' in capsys.readouterr().err

@@ -202,3 +202,17 @@ def test_replay_executable_finishes_by_itself(tmp_path):
     assert f'replay done: {N} messages published' in result.stderr + result.stdout
     # 0.975 s recorded / 4 + 0.1 s delay + start-up; well under the 60 s timeout
     assert time.monotonic() - started < 30.0
+
+
+@pytest.mark.parametrize('bag, message', [
+    ('missing_bag', 'does not exist'),
+    ('garbage.mcap', 'not an MCAP file'),
+])
+def test_replay_of_an_unreadable_bag_says_why_and_exits_2(tmp_path, bag, message):
+    path = tmp_path / bag
+    if bag.endswith('.mcap'):
+        path.write_bytes(b'this is not a bag')
+    run = subprocess.run([sys.executable, '-m', 'suspension_tuning.nodes.replay', '--ros-args',
+                          '-p', f'bag:={path}'], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2
+    assert message in run.stderr

@@ -19,6 +19,7 @@ when playback is done (unless ``loop``), so ``ros2 run suspension_tuning replay
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 
@@ -85,7 +86,10 @@ class ReplayNode(Node):
 
     def _on_parameters(self, parameters) -> None:
         if any(p.name == 'bag' and p.value for p in parameters) and self._thread is None:
-            self.start()
+            try:
+                self.start()
+            except ValueError as error:
+                self.get_logger().error(f'cannot replay: {error}')
 
     def start(self) -> None:
         """Open the bag, create the publishers and start playback in a thread.
@@ -101,6 +105,8 @@ class ReplayNode(Node):
         path = self.get_parameter('bag').value
         only = {t for t in self.get_parameter('topics').value if t}
         contents = read_messages(path, topics=only or None)
+        if not contents.complete and contents.message_count == 0:
+            raise ValueError(f'{path}: {contents.stop_reason}: nothing to replay')
         if not contents.complete:
             self.get_logger().warning(
                 f'{path}: {contents.stop_reason}; replaying the {contents.message_count} '
@@ -177,7 +183,12 @@ class ReplayNode(Node):
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning replay``: returns when playback ends."""
     rclpy.init(args=args)
-    node = ReplayNode()
+    try:
+        node = ReplayNode()
+    except ValueError as error:
+        print(f'replay: {error}', file=sys.stderr)
+        rclpy.try_shutdown()
+        sys.exit(2)
     executor = MultiThreadedExecutor(num_threads=2)
     executor.add_node(node)
     try:
