@@ -368,6 +368,31 @@ def _slsqp(
     )
 
 
+def _recording(model: FullModelCache, history: list[dict[str, Any]], recorder: _Recorder):
+    """Return ``add(x)``: record the point x of a run without a move limit (SLSQP, grid).
+
+    The values come from the model's cache (the point was evaluated already), the run
+    count from the model; the record goes into ``history`` and the run's bag.
+    """
+
+    def add(x: Array) -> None:
+        f, g = model(x)
+        rec = {
+            'iteration': len(history),
+            'x': x,
+            'f': f,
+            'g': g,
+            'rho': 0.0,
+            'rho_next': 0.0,
+            'max_violation': max_violation(g),
+        }
+        counter = RunCounter(full_runs=model.n_runs)
+        history.append(_history_entry(rec, counter))
+        recorder.add(rec, counter)
+
+    return add
+
+
 def run_slsqp(
     scenario: str,
     n_vars: int,
@@ -388,20 +413,7 @@ def run_slsqp(
     history: list[dict[str, Any]] = []
     x0 = start_point(start, n_vars)
 
-    def add(x: Array) -> None:
-        f, g = model(x)  # cached: the optimiser evaluated x already
-        rec = {
-            'iteration': len(history),
-            'x': x,
-            'f': f,
-            'g': g,
-            'rho': 0.0,
-            'rho_next': 0.0,
-            'max_violation': max_violation(g),
-        }
-        counter = RunCounter(full_runs=model.n_runs)
-        history.append(_history_entry(rec, counter))
-        recorder.add(rec, counter)
+    add = _recording(model, history, recorder)
 
     t0 = time.perf_counter()
     add(x0)  # iteration 0: the start point (SLSQP's own first evaluation hits the cache)
@@ -494,20 +506,7 @@ def reference_optimum(
     recorder = _Recorder(record)
     history: list[dict[str, Any]] = []
 
-    def add(x: Array) -> None:
-        f, g = model(x)
-        rec = {
-            'iteration': len(history),
-            'x': x,
-            'f': f,
-            'g': g,
-            'rho': 0.0,
-            'rho_next': 0.0,
-            'max_violation': max_violation(g),
-        }
-        counter = RunCounter(full_runs=model.n_runs)
-        history.append(_history_entry(rec, counter))
-        recorder.add(rec, counter)
+    add = _recording(model, history, recorder)
 
     add(best_x)
     starts = [('grid', grid[i]) for i in order[:POLISH_STARTS] if feasible[i]]
