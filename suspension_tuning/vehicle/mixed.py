@@ -45,8 +45,13 @@ from suspension_tuning.vehicle.params import (
     load_scenarios_config,
     load_vehicle_params,
 )
-from suspension_tuning.vehicle.scenarios import ScenarioResult, handling_setup, ride_road_spec
-from suspension_tuning.vehicle.scenarios import _histories as histories_of
+from suspension_tuning.vehicle.scenarios import (
+    ScenarioResult,
+    crossing_time,
+    decimated_histories,
+    handling_setup,
+    ride_road_spec,
+)
 from suspension_tuning.vehicle.valve_logic import (
     DAMPING_HIGH,
     RIDE_STATE,
@@ -195,8 +200,8 @@ def _result(xv, model, track, cfg, valve_log, period, start, wall, duration) -> 
     a_p = np.sqrt((acc_p ** 2).sum(-1) / count)
     # Handling part: eq. 10 windows as in the handling scenario, from x crossings.
     x0_lc, x1_lc = track.first_lane_change_x_m
-    t_lc = (_crossing(x_full, tf, x0_lc), _crossing(x_full, tf, x1_lc))
-    t_man = (_crossing(x_full, tf, 0.0), _crossing(x_full, tf, track.x_end_m))
+    t_lc = (crossing_time(x_full, tf, x0_lc), crossing_time(x_full, tf, x1_lc))
+    t_man = (crossing_time(x_full, tf, 0.0), crossing_time(x_full, tf, track.x_end_m))
     roll_deg = np.degrees(full['roll_rad'])
     peak = metrics.first_peak(roll_deg, tf, t_lc)
     rate_rms = metrics.roll_rate_rms(np.degrees(full['roll_rate_radps']), tf, t_man)
@@ -209,7 +214,7 @@ def _result(xv, model, track, cfg, valve_log, period, start, wall, duration) -> 
            'valve_switches': switches.astype(float),
            'handling_state_fraction': handling_share}
     t_hist = rec.t_hist_s
-    hists = histories_of(rec)
+    hists = decimated_histories(rec)
     idx = np.minimum((t_hist / period).astype(int), valve_log.shape[-1] - 1)
     hists['valve_state'] = valve_log[:, :, idx]
     result = ScenarioResult('mixed', xv, f, g, met, hists, wall, duration)
@@ -225,7 +230,5 @@ def comfort_filtered(acc: np.ndarray, fs: float) -> np.ndarray:
     return signal.sosfilt(comfort.wb_sos(fs), acc, axis=-1)
 
 
-def _crossing(x_full: np.ndarray, t: np.ndarray, x_target: float) -> np.ndarray:
-    return np.array([np.interp(x_target, np.maximum.accumulate(xh), t) for xh in x_full])
 
 

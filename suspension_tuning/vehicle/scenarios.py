@@ -149,7 +149,8 @@ def run_scenario(
     return _run_handling(xv, setting, params, cfg['handling'])
 
 
-def _histories(rec: SimulationRecord) -> dict[str, np.ndarray]:
+def decimated_histories(rec: SimulationRecord) -> dict[str, np.ndarray]:
+    """Named outputs at the history rate, (batch, ..., m), plus the times t_s (m,)."""
     out = outputs_from_channels(rec.full[:, :, :: rec.decimation], rec.hist)
     m = rec.hist.shape[2]
     out = {k: v[..., :m] for k, v in out.items()}
@@ -183,7 +184,7 @@ def _run_ride(
     keep = rec.t_full_s >= settle
     fz = full['tyre_fz_n'][..., keep]
     g = metrics.tyre_hop_constraints(fz, rec.dt_s)
-    hist = _histories(rec)
+    hist = decimated_histories(rec)
     met = {
         'a_rms_driver_mps2': np.asarray(a_d),
         'a_rms_passenger_mps2': np.asarray(a_p),
@@ -231,7 +232,8 @@ def dlc_controller(
     return ctrl
 
 
-def _crossing_time(x_hist: np.ndarray, t: np.ndarray, x_target: float) -> np.ndarray:
+def crossing_time(x_hist: np.ndarray, t: np.ndarray, x_target: float) -> np.ndarray:
+    """Time at which each design's x (batch, m) first reaches ``x_target`` (batch,), s."""
     return np.array([np.interp(x_target, np.maximum.accumulate(xh), t) for xh in x_hist])
 
 
@@ -247,11 +249,11 @@ def _run_handling(
         setting, ValveState.handling(batch), speed, x0_m=-lead, driver=driver, speed_controller=sc
     )
     rec = model.simulate(duration)
-    hist = _histories(rec)
+    hist = decimated_histories(rec)
     th = hist['t_s']
     x0_lc, x1_lc = track.first_lane_change_x_m
-    t_lc = (_crossing_time(hist['x_m'], th, x0_lc), _crossing_time(hist['x_m'], th, x1_lc))
-    t_man = (_crossing_time(hist['x_m'], th, 0.0), _crossing_time(hist['x_m'], th, track.x_end_m))
+    t_lc = (crossing_time(hist['x_m'], th, x0_lc), crossing_time(hist['x_m'], th, x1_lc))
+    t_man = (crossing_time(hist['x_m'], th, 0.0), crossing_time(hist['x_m'], th, track.x_end_m))
     full = outputs_from_channels(rec.full, rec.hist[:, :, :0])
     tf = rec.t_full_s
     roll_deg = np.degrees(full['roll_rad'])
