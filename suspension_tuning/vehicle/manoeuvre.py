@@ -39,9 +39,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
-from suspension_tuning.paths import config_dir
+from suspension_tuning.paths import config_dir, read_yaml
 
 DEFAULT_CONFIG_PATH = config_dir() / 'manoeuvre.yaml'
 """config/manoeuvre.yaml of the source tree."""
@@ -665,12 +664,7 @@ class ManoeuvreSetup:
 
 def load_manoeuvre_config(path: str | Path | None = None) -> dict:
     """Return the raw mapping of config/manoeuvre.yaml (or ``path``)."""
-    p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
-    with open(p, encoding='utf-8') as fh:
-        data = yaml.safe_load(fh)
-    if not isinstance(data, dict):
-        raise ValueError(f'{p} does not hold a mapping')
-    return data
+    return read_yaml(Path(path) if path is not None else DEFAULT_CONFIG_PATH)
 
 
 def load_manoeuvre(wheelbase_m: float, path: str | Path | None = None) -> ManoeuvreSetup:

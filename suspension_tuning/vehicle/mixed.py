@@ -28,9 +28,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
-from suspension_tuning.paths import config_dir
+from suspension_tuning.paths import config_dir, read_yaml
 from suspension_tuning.vehicle import comfort, design, metrics
 from suspension_tuning.vehicle import road as road_mod
 from suspension_tuning.vehicle.full_model import (
@@ -67,7 +66,7 @@ Controller = Callable[[int, dict[str, Any]], tuple[int, int, int, int]]
 
 def load_mixed_config(path: str | Path | None = None) -> dict[str, Any]:
     """Read config/mixed.yaml."""
-    return yaml.safe_load(Path(path or config_dir() / 'mixed.yaml').read_text())
+    return read_yaml(Path(path or config_dir() / 'mixed.yaml'))
 
 
 def in_process_controllers(batch: int, params: ValveControllerParams | None = None

@@ -12,20 +12,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
-from suspension_tuning.paths import config_dir
+from suspension_tuning.paths import config_dir, read_yaml
 
 CONFIG_DIR = config_dir()
 LITRE_M3 = 1.0e-3
 
 
 def _read_yaml(path: str | Path) -> dict[str, Any]:
-    with open(path, encoding='utf-8') as fh:
-        data = yaml.safe_load(fh)
-    if not isinstance(data, dict):
-        raise ValueError(f'{path}: expected a YAML mapping at top level')
-    return data
+    return read_yaml(path)
 
 
 @dataclass(frozen=True)

@@ -39,7 +39,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
+
+from suspension_tuning.paths import read_yaml
 
 from . import _simplified_kernel as SK  # noqa: N812
 from . import strut as strut_mod
@@ -58,12 +59,7 @@ KMH = 1.0 / 3.6  # [m/s per km/h]
 
 def load_simplified_config(path: str | Path | None = None) -> dict[str, Any]:
     """Load config/simplified_models.yaml as a plain mapping (units in the key names)."""
-    path = Path(path) if path is not None else SIMPLIFIED_CONFIG_PATH
-    with open(path, encoding='utf-8') as fh:
-        data = yaml.safe_load(fh)
-    if not isinstance(data, dict):
-        raise ValueError(f'{path}: expected a YAML mapping at top level')
-    return data
+    return read_yaml(Path(path) if path is not None else SIMPLIFIED_CONFIG_PATH)
 
 
 @functools.lru_cache(maxsize=4)

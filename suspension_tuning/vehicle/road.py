@@ -29,10 +29,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 from scipy import special
 
-from suspension_tuning.paths import config_dir
+from suspension_tuning.paths import config_dir, read_yaml
 
 DEFAULT_CONFIG_PATH = config_dir() / 'road.yaml'
 """config/road.yaml of the source tree."""
@@ -164,9 +163,8 @@ def load_road_spec(name: str = 'belgian_paving', path: str | Path | None = None)
         The specification.
     """
     p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
-    with open(p, encoding='utf-8') as fh:
-        data = yaml.safe_load(fh)
-    roads = data.get('roads', {}) if isinstance(data, dict) else {}
+    data = read_yaml(p)
+    roads = data.get('roads', {})
     if name not in roads:
         raise ValueError(f'road {name!r} not found in {p}; available: {sorted(roads)}')
     return RoadSpec.from_yaml_dict(roads[name])
