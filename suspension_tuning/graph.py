@@ -63,26 +63,30 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
 class SpinningGraph:
     """The graph's nodes spinning in background threads.
 
-    The recorder gets an executor of its own (single-threaded, the fastest for raw
-    subscriptions): on the shared executor a telemetry burst of thousands of messages
-    would wait behind the other nodes' callbacks.  :meth:`shutdown` stops the executors,
-    joins the threads and destroys the nodes (the recorder finalises its bag).
+    The recorder and the valve controller get executors of their own
+    (single-threaded): on the shared executor a telemetry burst of thousands of
+    messages would wait behind the other nodes' callbacks, and a step-locked closed
+    loop was seen to wait seconds for the controller's answers.  :meth:`shutdown`
+    stops the executors, joins the threads and destroys the nodes (the recorder
+    finalises its bag).
     """
 
     def __init__(self, nodes: list[Node], extra: list[Node] = ()) -> None:
         from suspension_tuning.nodes.recorder import RecorderNode
+        from suspension_tuning.nodes.valve_controller import ValveControllerNode
 
         self.nodes = [*nodes, *extra]
-        recorders = [n for n in self.nodes if isinstance(n, RecorderNode)]
-        others = [n for n in self.nodes if not isinstance(n, RecorderNode)]
+        alone = (RecorderNode, ValveControllerNode)
+        others = [n for n in self.nodes if not isinstance(n, alone)]
         self.executors: list[Executor] = [MultiThreadedExecutor(
             num_threads=max(4, 2 * len(others)), context=others[0].context)]
         for node in others:
             self.executors[0].add_node(node)
-        for node in recorders:
-            executor = SingleThreadedExecutor(context=node.context)
-            executor.add_node(node)
-            self.executors.append(executor)
+        for node in self.nodes:
+            if isinstance(node, alone):
+                executor = SingleThreadedExecutor(context=node.context)
+                executor.add_node(node)
+                self.executors.append(executor)
         self.threads = [threading.Thread(target=self._spin, args=(e,), daemon=True)
                         for e in self.executors]
         for thread in self.threads:

@@ -88,3 +88,17 @@ def test_inconsistent_thresholds_are_rejected():
     with pytest.raises(ValueError, match='lateral_acceleration'):
         ValveControllerParams(lateral_acceleration_on_mps2=1.0,
                               lateral_acceleration_off_mps2=2.0)
+
+
+def test_repeating_a_step_changes_nothing():
+    # The closed loop republishes a vehicle state whose answer is late; the controller
+    # must then answer the same step with the same state and log no new event.
+    twice, once = ValveController(PARAMS), ValveController(PARAMS)
+    pressures = (2.5e6,) * 4
+    for step in range(60):
+        ay = 3.0 if 10 <= step < 20 else 0.0
+        first = twice.update(step, ay, 0.0, 0.0, pressures)
+        assert twice.update(step, ay, 0.0, 0.0, pressures) == first
+        assert once.update(step, ay, 0.0, 0.0, pressures) == first
+    assert [(e.step, e.axle, e.kind) for e in twice.events] == \
+        [(e.step, e.axle, e.kind) for e in once.events]

@@ -26,11 +26,11 @@ Several workers run as ``--ros-args -r __node:=sim_0`` etc.; each serves its own
 from __future__ import annotations
 
 import math
-import threading
 import time
 
 import numpy as np
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_services_default
 from rclpy.service_introspection import ServiceIntrospectionState
@@ -77,14 +77,25 @@ class TopicValveController:
                            steering_rate_radps=state['steering_rate_radps'],
                            strut_pressure_pa=list(state['strut_pressure_pa']))
         msg.header.stamp, msg.header.frame_id = sim_time, 'base_link'
-        with node.valve_answer:
-            node.valve_answers.clear()
+        node.valve_answers.clear()
+        # The closed loop runs on a node and executor of its own, spun here by the
+        # service callback's thread (as rclpy's wait_for_message does): the answer must
+        # not wait for the node's shared executor, which may be busy or asleep.  A state
+        # without an answer within a second is published again (the controller's update
+        # is idempotent for a repeated step).
+        deadline = time.monotonic() + self.timeout_s
+        while True:
             node.state_pub.publish(msg)
-            if not node.valve_answer.wait_for(lambda: step in node.valve_answers,
-                                              self.timeout_s):
-                raise RuntimeError(f'no valve state for step {step} within {self.timeout_s} s: '
-                                   'is the valve_controller node running?')
-            return node.valve_answers[step]
+            resend = min(time.monotonic() + 1.0, deadline)
+            while step not in node.valve_answers and time.monotonic() < resend:
+                node.loop_executor.spin_once(timeout_sec=0.05)
+            if step in node.valve_answers:
+                return node.valve_answers[step]
+            if time.monotonic() >= deadline:
+                raise RuntimeError(f'no valve state for step {step} within {self.timeout_s} '
+                                   's: is the valve_controller node running?')
+            node.get_logger().warning(f'no valve state for step {step} yet: publishing '
+                                      'the vehicle state again')
 
 
 def stamp(node: Node, t_s: float):
@@ -112,12 +123,16 @@ class FullVehicleSimNode(Node):
         self.declare_parameter('telemetry_decimation', 2)
         self.declare_parameter('valve_controller', 'ros')
         self.declare_parameter('closed_loop_timeout_s', 5.0)
-        self.clock_pub = self.create_publisher(Clock, '/clock', 10)
-        self.state_pub = self.create_publisher(VehicleState, '/vehicle/state', RELIABLE)
-        self.valve_answer = threading.Condition()
+        self.loop_node = rclpy.create_node(f'{name}_closed_loop', context=self.context,
+                                           namespace=self.get_namespace())
+        self.loop_executor = SingleThreadedExecutor(context=self.context)
+        self.loop_executor.add_node(self.loop_node)
+        self.clock_pub = self.loop_node.create_publisher(Clock, '/clock', 10)
+        self.state_pub = self.loop_node.create_publisher(VehicleState, '/vehicle/state',
+                                                         RELIABLE)
         self.valve_answers: dict[int, tuple[int, int, int, int]] = {}
-        self.create_subscription(ValveState, '/suspension/valve_state', self._on_valve_state,
-                                 RELIABLE, callback_group=MutuallyExclusiveCallbackGroup())
+        self.loop_node.create_subscription(ValveState, '/suspension/valve_state',
+                                           self._on_valve_state, RELIABLE)
         service = self.create_service(EvaluateDesign, '~/evaluate', self._on_evaluate)
         service.configure_introspection(self.get_clock(), qos_profile_services_default,
                                         ServiceIntrospectionState.CONTENTS)
@@ -173,10 +188,14 @@ class FullVehicleSimNode(Node):
         return [TopicValveController(self, timeout)]
 
     def _on_valve_state(self, msg: ValveState) -> None:
-        with self.valve_answer:
-            self.valve_answers[int(msg.step)] = (msg.front_spring, msg.front_damping,
-                                                 msg.rear_spring, msg.rear_damping)
-            self.valve_answer.notify_all()
+        self.valve_answers[int(msg.step)] = (msg.front_spring, msg.front_damping,
+                                             msg.rear_spring, msg.rear_damping)
+
+    def destroy_node(self) -> None:
+        """Destroy the closed-loop node and its executor too."""
+        self.loop_executor.shutdown(timeout_sec=1.0)
+        self.loop_node.destroy_node()
+        super().destroy_node()
 
     def publish_telemetry(self, histories: dict[str, np.ndarray], index: int = 0) -> None:
         """Publish the time histories of design ``index`` on the telemetry topics."""
