@@ -15,6 +15,7 @@ Per-test timeouts come from pytest-timeout (``pytest.ini``).
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
 import tempfile
 import threading
@@ -40,6 +41,21 @@ os.environ.setdefault('ROS_LOG_DIR', tempfile.mkdtemp(prefix='suspension_tuning_
 _prefixes = os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)
 if sys.prefix not in _prefixes:
     os.environ['AMENT_PREFIX_PATH'] = os.pathsep.join([sys.prefix, *filter(None, _prefixes)])
+
+
+def _clean_stale_shared_memory() -> None:
+    """Remove Fast DDS shared-memory segments left by killed processes.
+
+    SIGKILLed participants (the worker-failure test kills two) leave their segments and
+    port locks in /dev/shm; with hundreds of them, replies were seen to arrive seconds
+    late.  ``fastdds shm clean`` removes only segments no live process uses.
+    """
+    tool = os.path.join(sys.prefix, 'bin', 'fastdds')
+    if os.path.exists(tool):
+        subprocess.run([tool, 'shm', 'clean'], capture_output=True, timeout=60, check=False)
+
+
+_clean_stale_shared_memory()
 
 
 def assert_loopback_only() -> None:
