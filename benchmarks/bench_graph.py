@@ -32,6 +32,9 @@ os.environ.setdefault('ROS_DOMAIN_ID', '91')
 
 import numpy as np  # noqa: E402
 
+# As in the node executables: one malloc arena, set before any thread allocates.
+import suspension_tuning.nodes  # noqa: E402, F401
+
 SCENARIO, N_VARS, SAMPLES, REPEATS = 'ride', 2, 30, 8
 
 
