@@ -2,7 +2,8 @@
 
 ``ros2 run suspension_tuning graph --workers 2`` starts the simulation workers
 (``sim_0``, ``sim_1``, ...), the gradient evaluator, the valve controller, the
-coordinator and (unless ``--no-record``) the recorder on one MultiThreadedExecutor.
+coordinator and (unless ``--no-record``) the recorder, each node on an executor
+of its own.
 ROS parameters come from ``--ros-args --params-file config/graph.yaml`` like for any
 node.  Each node also runs alone with ``ros2 run suspension_tuning <node>``.
 """
@@ -61,32 +62,34 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
 
 
 class SpinningGraph:
-    """The graph's nodes spinning in background threads.
+    """The graph's nodes spinning in background threads, one executor per node.
 
-    The recorder and the valve controller get executors of their own
-    (single-threaded): on the shared executor a telemetry burst of thousands of
-    messages would wait behind the other nodes' callbacks, and a step-locked closed
-    loop was seen to wait seconds for the controller's answers.  :meth:`shutdown`
-    stops the executors, joins the threads and destroys the nodes (the recorder
-    finalises its bag).
+    Every node but the coordinator gets a SingleThreadedExecutor: none of their
+    callbacks waits on another callback of the same executor (the service calls of
+    the gradient evaluator spin a private executor, ``_service_calls.ServiceCaller``),
+    and a callback then runs in the thread that took its request, with no hand-over
+    to a thread pool.  Measured on the 2-variable ride optimisation
+    (``benchmarks/bench_graph.py``): one shared MultiThreadedExecutor added 56 ms to
+    a 0.95 s run, one executor per node 38 ms.  The coordinator keeps a
+    MultiThreadedExecutor: its action's execute callback runs for a whole
+    optimisation while goal, cancel and parameter requests must still be served.
+    Separate executors also keep a telemetry burst for the recorder and the
+    step-locked valve controller from waiting behind other nodes' callbacks.
+    :meth:`shutdown` stops the executors, joins the threads and destroys the nodes
+    (the recorder finalises its bag).
     """
 
     def __init__(self, nodes: list[Node], extra: list[Node] = ()) -> None:
-        from suspension_tuning.nodes.recorder import RecorderNode
-        from suspension_tuning.nodes.valve_controller import ValveControllerNode
+        from suspension_tuning.nodes.coordinator import CoordinatorNode
 
         self.nodes = [*nodes, *extra]
-        alone = (RecorderNode, ValveControllerNode)
-        others = [n for n in self.nodes if not isinstance(n, alone)]
-        self.executors: list[Executor] = [MultiThreadedExecutor(
-            num_threads=max(4, 2 * len(others)), context=others[0].context)]
-        for node in others:
-            self.executors[0].add_node(node)
+        self.executors: list[Executor] = []
         for node in self.nodes:
-            if isinstance(node, alone):
-                executor = SingleThreadedExecutor(context=node.context)
-                executor.add_node(node)
-                self.executors.append(executor)
+            executor = (MultiThreadedExecutor(num_threads=4, context=node.context)
+                        if isinstance(node, CoordinatorNode)
+                        else SingleThreadedExecutor(context=node.context))
+            executor.add_node(node)
+            self.executors.append(executor)
         self.threads = [threading.Thread(target=self._spin, args=(e,), daemon=True)
                         for e in self.executors]
         for thread in self.threads:

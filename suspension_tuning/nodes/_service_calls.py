@@ -1,10 +1,10 @@
-"""Blocking service calls from worker threads, and a pool of simulation workers.
+"""Blocking service calls from callbacks, and a pool of simulation workers.
 
 rclpy's ``Client.call()`` must not be used inside a callback (it may deadlock,
-rclpy/client.py).  The coordinator and the gradient evaluator call services from
-the thread of an action or service callback running on a MultiThreadedExecutor, so
-they send with ``call_async`` and wait on a ``threading.Event`` set by the future's
-done-callback, with a timeout; the executor's other threads deliver the response.
+rclpy/client.py).  The coordinator and the gradient evaluator call services from an
+action or service callback, so their clients sit on a private node whose executor
+the waiting thread spins itself (:class:`ServiceCaller`), with timeouts; the
+callback's own executor may then be single-threaded.
 """
 
 from __future__ import annotations
@@ -15,7 +15,8 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from rclpy.callback_groups import ReentrantCallbackGroup
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
@@ -39,50 +40,108 @@ def wait_future(future: Any, timeout_s: float | None = None) -> Any:
     return future.result()
 
 
-def call(node: Node, client: Any, request: Any, timeout_s: float,
-         wait_for_service_s: float = 5.0) -> Any:
-    """Call a service and wait for its response from a non-executor thread.
+class ServiceCaller:
+    """Service clients on a private node, spun by the thread that waits for them.
+
+    A node's service callback that calls another service must not wait for an
+    executor to deliver the response from another thread: on a MultiThreadedExecutor
+    that costs a hand-over between Python threads (a wake of the executor, a thread
+    of its pool, then the waiting thread) for every response, about 2-3 ms, and on a
+    SingleThreadedExecutor it deadlocks.  So the clients live on a hidden node of
+    their own (``_<node>_calls``) with a SingleThreadedExecutor that the calling
+    thread spins itself until its responses are in (as ``rclpy.spin_until_future_complete``
+    does).  Callers on several threads take turns (a lock).
 
     Parameters
     ----------
     node : rclpy.node.Node
-        Node owning the client (for logging).
-    client : rclpy.client.Client
-        Client, in a callback group that lets the response be delivered while this
-        thread waits (e.g. ReentrantCallbackGroup on a MultiThreadedExecutor).
-    request : object
-        Service request.
-    timeout_s : float
-        Time to wait for the response, s.
-    wait_for_service_s : float
-        Time to wait for the service to appear, s.
-
-    Returns
-    -------
-    object
-        The response.
-
-    Raises
-    ------
-    ServiceCallError
-        Service unavailable, no response within ``timeout_s``, or service gone.
+        The node on whose behalf the calls are made (name, namespace, context).
     """
-    if not client.wait_for_service(timeout_sec=wait_for_service_s):
-        raise ServiceCallError(f'service {client.srv_name} not available')
-    done = threading.Event()
-    future = client.call_async(request)
-    future.add_done_callback(lambda _: done.set())
-    deadline = time.monotonic() + timeout_s
-    while not done.wait(0.1):
-        if time.monotonic() > deadline:
-            client.remove_pending_request(future)
-            raise ServiceCallError(f'service {client.srv_name}: no response within {timeout_s} s')
-        if not client.service_is_ready():
-            client.remove_pending_request(future)
-            raise ServiceCallError(f'service {client.srv_name} vanished while waiting')
-    if future.exception() is not None:
-        raise ServiceCallError(f'service {client.srv_name} failed: {future.exception()}')
-    return future.result()
+
+    def __init__(self, node: Node) -> None:
+        self.owner = node
+        self.node = rclpy.create_node(f'_{node.get_name()}_calls', context=node.context,
+                                      namespace=node.get_namespace(),
+                                      start_parameter_services=False, enable_rosout=False)
+        self.executor = SingleThreadedExecutor(context=node.context)
+        self.executor.add_node(self.node)
+        self._lock = threading.Lock()
+
+    def create_client(self, srv_type: Any, name: str) -> Any:
+        """A client of service ``name`` (relative names resolve in the owner's namespace)."""
+        return self.node.create_client(srv_type, name)
+
+    def call(self, client: Any, request: Any, timeout_s: float,
+             wait_for_service_s: float = 5.0) -> Any:
+        """Call one service and return its response.
+
+        Raises
+        ------
+        ServiceCallError
+            Service unavailable, no response within ``timeout_s`` seconds, or service
+            gone while waiting.
+        """
+        outcome = self.call_many([(client, request)], timeout_s, wait_for_service_s)[0]
+        if isinstance(outcome, ServiceCallError):
+            raise outcome
+        return outcome
+
+    def call_many(self, calls: Sequence[tuple[Any, Any]], timeout_s: float,
+                  wait_for_service_s: float = 5.0) -> list[Any]:
+        """Send several requests at once and wait for all of them.
+
+        Parameters
+        ----------
+        calls : sequence of (client, request)
+            Clients created by :meth:`create_client`, and their requests.
+        timeout_s : float
+            Time each request may take, s.
+        wait_for_service_s : float
+            Time to wait for a service to appear, s.
+
+        Returns
+        -------
+        list
+            Per call, in order: the response, or a :class:`ServiceCallError` saying
+            why there is none (unavailable, timed out, vanished).
+        """
+        outcomes: list[Any] = [None] * len(calls)
+        pending: dict[int, Any] = {}
+        with self._lock:
+            for i, (client, request) in enumerate(calls):
+                if not client.wait_for_service(timeout_sec=wait_for_service_s):
+                    outcomes[i] = ServiceCallError(f'service {client.srv_name} not available')
+                else:
+                    pending[i] = client.call_async(request)
+            deadline = time.monotonic() + timeout_s
+            while pending:
+                # Short spins: a worker that vanishes is noticed within 0.1 s.
+                self.executor.spin_once(timeout_sec=0.1)
+                expired = time.monotonic() > deadline
+                for i, future in list(pending.items()):
+                    client = calls[i][0]
+                    if future.done():
+                        error = future.exception()
+                        outcomes[i] = (ServiceCallError(f'service {client.srv_name} failed: '
+                                                        f'{error}') if error is not None
+                                       else future.result())
+                    elif expired:
+                        outcomes[i] = ServiceCallError(f'service {client.srv_name}: no '
+                                                       f'response within {timeout_s} s')
+                    elif not client.service_is_ready():
+                        outcomes[i] = ServiceCallError(f'service {client.srv_name} vanished '
+                                                       'while waiting')
+                    else:
+                        continue
+                    if not future.done():
+                        client.remove_pending_request(future)
+                    del pending[i]
+        return outcomes
+
+    def destroy(self) -> None:
+        """Stop the private executor and destroy the private node."""
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
 
 
 class SimulationPool:
@@ -96,23 +155,21 @@ class SimulationPool:
 
     Parameters
     ----------
-    node : rclpy.node.Node
-        Node that owns the clients.
+    caller : ServiceCaller
+        The calling node's private clients.
     workers : sequence of str
         Worker node names or namespaces, e.g. ``['/sim_0', '/sim_1']``.
     timeout_s : float
         Time one chunk may take before its worker is declared dead, s.
     """
 
-    def __init__(self, node: Node, workers: Sequence[str], timeout_s: float) -> None:
+    def __init__(self, caller: ServiceCaller, workers: Sequence[str], timeout_s: float) -> None:
         if not workers:
             raise ValueError('at least one simulation worker is needed')
-        self.node = node
+        self.caller = caller
         self.timeout_s = timeout_s
-        group = ReentrantCallbackGroup()
-        self.clients = {name: node.create_client(EvaluateDesign,
-                                                 f'{name.rstrip("/")}/evaluate',
-                                                 callback_group=group)
+        self.clients = {name: caller.create_client(EvaluateDesign,
+                                                   f'{name.rstrip("/")}/evaluate')
                         for name in workers}
         self.alive = list(workers)
         self.calls = 0
@@ -136,25 +193,22 @@ class SimulationPool:
         while pending:
             if not self.alive:
                 raise ServiceCallError('no simulation worker left: every worker failed or '
-                                 'timed out (' + ', '.join(self.clients) + ')')
-            results: dict[int, Any] = {}
-            threads = []
+                                       'timed out (' + ', '.join(self.clients) + ')')
+            sent = []
             for slot, (index, chunk) in enumerate(pending.items()):
                 worker = self.alive[slot % len(self.alive)]
-                request = EvaluateDesign.Request(
+                sent.append((index, worker, EvaluateDesign.Request(
                     scenario=scenario, n_vars=n_vars,
                     designs=designs[chunk].ravel().tolist(),
                     publish_telemetry=publish_telemetry and index == 0,
-                    return_inputs=return_inputs)
-                thread = threading.Thread(target=self._send, daemon=True,
-                                          args=(worker, request, index, results))
-                threads.append(thread)
-                thread.start()
-            for thread in threads:
-                thread.join()
-            for index, (worker, outcome) in results.items():
+                    return_inputs=return_inputs)))
+            self.calls += len(sent)
+            outcomes = self.caller.call_many(
+                [(self.clients[worker], request) for _, worker, request in sent],
+                self.timeout_s)
+            for (index, worker, _), outcome in zip(sent, outcomes):
                 if isinstance(outcome, ServiceCallError):
-                    self.node.get_logger().warning(
+                    self.caller.owner.get_logger().warning(
                         f'worker {worker} failed ({outcome}); retrying its designs elsewhere')
                     if worker in self.alive:
                         self.alive.remove(worker)
@@ -164,11 +218,3 @@ class SimulationPool:
                 responses[index] = outcome
                 del pending[index]
         return [responses[i] for i in sorted(responses)]
-
-    def _send(self, worker: str, request: Any, index: int, results: dict) -> None:
-        self.calls += 1
-        try:
-            results[index] = (worker, call(self.node, self.clients[worker], request,
-                                           self.timeout_s))
-        except ServiceCallError as error:
-            results[index] = (worker, error)

@@ -32,7 +32,11 @@ from suspension_tuning_interfaces.action import Optimise
 from suspension_tuning_interfaces.msg import IterationRecord
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
-from suspension_tuning.nodes._service_calls import ServiceCallError, SimulationPool, call
+from suspension_tuning.nodes._service_calls import (
+    ServiceCaller,
+    ServiceCallError,
+    SimulationPool,
+)
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.dynamic_q import load_options
 from suspension_tuning.paths import config_dir
@@ -90,13 +94,14 @@ class CoordinatorNode(Node):
         self.declare_parameter('final_telemetry', True)
         group = ReentrantCallbackGroup()
         self.timeout_s = float(self.get_parameter('call_timeout_s').value)
-        self.pool = SimulationPool(self, list(self.get_parameter('sim_workers').value),
+        self.caller = ServiceCaller(self)
+        self.pool = SimulationPool(self.caller, list(self.get_parameter('sim_workers').value),
                                    self.timeout_s)
         gradient_node = str(self.get_parameter('gradient_node').value).rstrip('/')
-        self.gradient_client = self.create_client(EvaluateGradient, f'{gradient_node}/gradient',
-                                                  callback_group=group)
-        self.calibrate_client = self.create_client(Calibrate, f'{gradient_node}/calibrate',
-                                                   callback_group=group)
+        self.gradient_client = self.caller.create_client(EvaluateGradient,
+                                                         f'{gradient_node}/gradient')
+        self.calibrate_client = self.caller.create_client(Calibrate,
+                                                          f'{gradient_node}/calibrate')
         config = str(self.get_parameter('optimiser_config').value) or str(
             CONFIG_DIR / 'optimiser.yaml')
         self.options = load_options(config, str(self.get_parameter('optimiser_section').value))
@@ -153,7 +158,7 @@ class CoordinatorNode(Node):
 
     def _simplified_gradient(self, request: TuningRequest):
         def gradient(x: np.ndarray, inputs: Any) -> tuple[np.ndarray, np.ndarray]:
-            response = call(self, self.gradient_client, EvaluateGradient.Request(
+            response = self.caller.call(self.gradient_client, EvaluateGradient.Request(
                 scenario=request.scenario, n_vars=request.n_vars, x=x.tolist(),
                 step=request.fd_step, inputs=inputs), self.timeout_s)
             if not response.success:
@@ -163,7 +168,7 @@ class CoordinatorNode(Node):
         return gradient
 
     def _calibrate(self, request: TuningRequest) -> Calibrate.Response:
-        response = call(self, self.calibrate_client, Calibrate.Request(
+        response = self.caller.call(self.calibrate_client, Calibrate.Request(
             scenario=request.scenario, n_vars=request.n_vars,
             n_samples=int(self.get_parameter('calibration_samples').value), force=False),
             self.timeout_s * 2)
@@ -225,6 +230,12 @@ class CoordinatorNode(Node):
             goal_handle.succeed()
         self.result_pub.publish(message)
         return message
+
+
+    def destroy_node(self) -> None:
+        """Destroy the private client node too."""
+        self.caller.destroy()
+        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> None:

@@ -26,7 +26,7 @@ from rclpy.service_introspection import ServiceIntrospectionState
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateDesign, EvaluateGradient
 
 from suspension_tuning import simplified_inputs
-from suspension_tuning.nodes._service_calls import ServiceCallError, call
+from suspension_tuning.nodes._service_calls import ServiceCaller, ServiceCallError
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.scaling import Scaling, scaling_key
 from suspension_tuning.optim.simplified_gradient import (
@@ -53,9 +53,9 @@ class GradientEvaluatorNode(Node):
         self.calibration_dir = Path(directory or Path.home() / '.cache' / 'suspension_tuning'
                                     / 'calibration')
         self.scalings: dict[tuple[str, int], Scaling] = {}
-        self.sim_client = self.create_client(EvaluateDesign,
-                                             str(self.get_parameter('sim_service').value),
-                                             callback_group=ReentrantCallbackGroup())
+        self.caller = ServiceCaller(self)
+        self.sim_client = self.caller.create_client(EvaluateDesign,
+                                                    str(self.get_parameter('sim_service').value))
         self.simplified_runs = 0
         for name, kind, callback in (('~/gradient', EvaluateGradient, self._on_gradient),
                                      ('~/calibrate', Calibrate, self._on_calibrate)):
@@ -114,7 +114,7 @@ class GradientEvaluatorNode(Node):
                           seed: int) -> Scaling:
         """Full-model samples from a simulation worker, then the eq. 25 fit."""
         timeout = float(self.get_parameter('call_timeout_s').value)
-        answer = call(self, self.sim_client, EvaluateDesign.Request(
+        answer = self.caller.call(self.sim_client, EvaluateDesign.Request(
             scenario=scenario, n_vars=n_vars, designs=x.ravel().tolist(), return_inputs=True),
             timeout)
         if not answer.success:
@@ -163,9 +163,15 @@ class GradientEvaluatorNode(Node):
         return scenario, int(n_vars)
 
 
+    def destroy_node(self) -> None:
+        """Destroy the private client node too."""
+        self.caller.destroy()
+        super().destroy_node()
+
+
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning gradient_evaluator``."""
-    run_node(GradientEvaluatorNode, args, multithreaded=True)
+    run_node(GradientEvaluatorNode, args, multithreaded=False)
 
 
 if __name__ == '__main__':
