@@ -51,3 +51,13 @@ def _parse_yaml(path: str, mtime_ns: int, size: int) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ValueError(f'{path}: expected a YAML mapping at the top level')
     return data
+
+
+def dump_yaml(data: Any) -> str:
+    """YAML text of plain data, keys in insertion order (libyaml's emitter when present).
+
+    PyYAML's pure-Python emitter takes about 1.5 ms for a run's configuration, paid
+    at the start of every optimisation through the graph; libyaml's takes a tenth.
+    """
+    dumper = getattr(yaml, 'CSafeDumper', yaml.SafeDumper)
+    return yaml.dump(data, Dumper=dumper, sort_keys=False)

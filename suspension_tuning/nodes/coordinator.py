@@ -39,7 +39,7 @@ from suspension_tuning.nodes._service_calls import (
 )
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.dynamic_q import load_options
-from suspension_tuning.paths import config_dir
+from suspension_tuning.paths import config_dir, dump_yaml
 from suspension_tuning.tuning import (
     FullEvaluation,
     RunCounter,
@@ -114,8 +114,8 @@ class CoordinatorNode(Node):
         # node runs (YAML in pure Python costs tens of ms, paid at start-up, not per run).
         files = {path.name: yaml.safe_load(path.read_text())
                  for path in sorted(CONFIG_DIR.glob('*.yaml'))}
-        self.static_config_yaml = yaml.safe_dump(
-            {'vehicle_configuration': files, 'code_version': code_version()}, sort_keys=False)
+        self.static_config_yaml = dump_yaml(
+            {'vehicle_configuration': files, 'code_version': code_version()})
         self.server = ActionServer(self, Optimise, '~/optimise', execute_callback=self._execute,
                                    goal_callback=lambda _: GoalResponse.ACCEPT,
                                    cancel_callback=lambda _: CancelResponse.ACCEPT,
@@ -141,7 +141,7 @@ class CoordinatorNode(Node):
                                        self.get_parameters_by_prefix('').items()},
             'started_unix_s': time.time(),
         }
-        text = yaml.safe_dump(config, sort_keys=False) + self.static_config_yaml
+        text = dump_yaml(config) + self.static_config_yaml
         self.config_pub.publish(String(data=text))
 
     def _full_model(self, request: TuningRequest):
