@@ -17,12 +17,13 @@ import threading
 import rclpy
 from rclpy.executors import (
     Executor,
-    ExternalShutdownException,
     MultiThreadedExecutor,
     SingleThreadedExecutor,
 )
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+
+from suspension_tuning.nodes._spin import spin_until_shutdown
 
 
 def build_nodes(workers: int = 1, record: bool = True, context=None,
@@ -97,10 +98,7 @@ class SpinningGraph:
 
     @staticmethod
     def _spin(executor: Executor) -> None:
-        try:
-            executor.spin()
-        except ExternalShutdownException:
-            pass
+        spin_until_shutdown(executor)
 
     def wait(self) -> None:
         """Block until the executors stop (Ctrl-C raises KeyboardInterrupt here)."""

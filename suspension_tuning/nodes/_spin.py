@@ -11,7 +11,26 @@ from rclpy.executors import (
     MultiThreadedExecutor,
     SingleThreadedExecutor,
 )
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
+
+
+def spin_until_shutdown(executor: Executor) -> None:
+    """Spin until Ctrl-C or the context shuts down, whichever way that shows.
+
+    Ctrl-C normally raises KeyboardInterrupt here, or ExternalShutdownException once
+    rclpy's signal handler has shut the context down.  When the interrupt lands in a
+    ``__del__`` (e.g. of an rclpy Future) Python prints and drops it, the context is
+    shut down all the same, and the next spin fails to build its wait set with an
+    RCLError: that is a shutdown too, not a crash.
+    """
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except _rclpy.RCLError:
+        if executor.context.ok():
+            raise
 
 
 def run_node(make_node: Callable[[], Node], args: list[str] | None = None,
@@ -34,9 +53,7 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None,
     executor: Executor = MultiThreadedExecutor() if multithreaded else SingleThreadedExecutor()
     executor.add_node(node)
     try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        spin_until_shutdown(executor)
     finally:
         node.destroy_node()
         executor.shutdown(timeout_sec=1.0)

@@ -1,0 +1,39 @@
+"""How a node's executor stops (suspension_tuning.nodes._spin.spin_until_shutdown)."""
+
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+from suspension_tuning.nodes._spin import spin_until_shutdown
+
+
+def _executor_failing_with_rcl_error(shut_down_first: bool):
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = SingleThreadedExecutor(context=context)
+
+    def spin():
+        # What a Ctrl-C swallowed by a __del__ leaves behind: rclpy's signal handler
+        # has shut the context down, and the next wait set cannot be built.
+        if shut_down_first:
+            context.shutdown()
+        raise _rclpy.RCLError('failed to initialize wait set: the given context is not valid')
+
+    executor.spin = spin
+    return context, executor
+
+
+def test_a_wait_set_error_after_the_context_shut_down_is_a_clean_stop():
+    context, executor = _executor_failing_with_rcl_error(shut_down_first=True)
+    spin_until_shutdown(executor)  # returns: no exception escapes
+    assert not context.ok()
+
+
+def test_a_wait_set_error_while_the_context_is_up_is_raised():
+    context, executor = _executor_failing_with_rcl_error(shut_down_first=False)
+    try:
+        with pytest.raises(_rclpy.RCLError):
+            spin_until_shutdown(executor)
+    finally:
+        context.shutdown()
