@@ -140,6 +140,24 @@ class Graph:
         done.wait()
         return time.perf_counter() - start, outcome.result().result
 
+    def bare_round_trip_s(self, calls: int = 200) -> float:
+        """Median time of a call to the simulation worker's get_parameters service.
+
+        The same path as an evaluate call (the coordinator's private caller, the
+        worker's executor) without a model run or logging.
+        """
+        from rcl_interfaces.srv import GetParameters
+
+        caller = self.nodes[2].caller
+        client = caller.create_client(GetParameters, '/full_vehicle_sim/get_parameters')
+        request = GetParameters.Request(names=['telemetry_decimation'])
+        times = []
+        for _ in range(calls):
+            start = time.perf_counter()
+            caller.call(client, request, 5.0)
+            times.append(time.perf_counter() - start)
+        return float(np.median(times))
+
     def close(self) -> None:
         import rclpy
 
@@ -171,6 +189,7 @@ def main() -> int:
                 local_s, local_result = in_process(graph.options)
                 local_model.append(clock.take())
                 local_times.append(local_s)
+    bare_s = graph.bare_round_trip_s()
     graph.close()
     same = bool(np.array_equal(graph_result.x, local_result.x)
                 and graph_result.f == local_result.f)
@@ -192,6 +211,7 @@ def main() -> int:
     trips = (graph_result.n_full_runs + graph_result.n_simplified_runs // (2 * N_VARS) + 2)
     print(f'service_round_trips: {trips}')
     print(f'overhead_per_round_trip_ms: {(graph_s - local_s) / trips * 1e3:.2f}')
+    print(f'bare_round_trip_ms: {bare_s * 1e3:.2f}')
     added = [(g - gm) - (loc - lm) for g, gm, loc, lm
              in zip(graph_times, graph_model, local_times, local_model)]
     print(f'model_time_graph_s: {np.median(graph_model):.3f}')
