@@ -46,6 +46,7 @@ from scipy import linalg, ndimage, optimize
 from . import _kernel as K  # noqa: N812
 from . import strut as strut_mod
 from . import tyre as tyre_mod
+from ._buffers import RECORDING
 from .params import VehicleParams, load_vehicle_params
 
 CORNERS = ('FL', 'FR', 'RL', 'RR')
@@ -666,6 +667,10 @@ class FullVehicleModel:
         """
         out = np.empty((s0.shape[0], 8))
         idx = [3, 4, 5, 6, 7, 8, 9, 10]
+        # Locals, not ``self``: with ``self`` in these closures a finished model (and
+        # its recorded arrays) stayed alive until the cyclic garbage collector ran,
+        # so the recording pool (_buffers.RECORDING) could not hand its arrays out.
+        ss, params, road = self._ss, self.params, self.road
         for bi in range(s0.shape[0]):
             base = s0[bi].copy()
             base[K.I_VEL0 : K.I_VEL0 + 8] = 0.0
@@ -675,7 +680,7 @@ class FullVehicleModel:
                 st = base.copy()
                 st[K.I_ZS : K.I_ZS + 8] = q
                 Q = generalised_forces_numpy(
-                    st[None], self._ss[bi : bi + 1], np.zeros((1, K.N_IN)), self.params, self.road
+                    st[None], ss[bi : bi + 1], np.zeros((1, K.N_IN)), params, road
                 )['Q'][0]
                 return Q[idx] / np.array([1e4, 1e4, 1e4, 1e4, 1e3, 1e3, 1e3, 1e3])
 
@@ -741,10 +746,10 @@ class FullVehicleModel:
     def _run_kernel(self, n: int) -> None:
         b = self.batch_size
         if self._record:
-            full = np.empty((b, K.N_FULL, n))
+            full = RECORDING.empty((b, K.N_FULL, n))
             first = (-self.step_index) % self.decimation
             n_hist = 0 if first >= n else (n - 1 - first) // self.decimation + 1
-            hist = np.empty((b, K.N_HIST, n_hist))
+            hist = RECORDING.empty((b, K.N_HIST, n_hist))
         else:
             full = np.empty((b, K.N_FULL, 0))
             hist = np.empty((b, K.N_HIST, 0))
