@@ -232,7 +232,7 @@ class FullVehicleSimNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning full_vehicle_sim``."""
-    run_node(FullVehicleSimNode, args, multithreaded=False)
+    run_node(FullVehicleSimNode, args, multithreaded=True)
 
 
 if __name__ == '__main__':

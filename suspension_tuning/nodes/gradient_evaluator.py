@@ -171,7 +171,7 @@ class GradientEvaluatorNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning gradient_evaluator``."""
-    run_node(GradientEvaluatorNode, args, multithreaded=False)
+    run_node(GradientEvaluatorNode, args, multithreaded=True)
 
 
 if __name__ == '__main__':
