@@ -21,10 +21,13 @@ N = 40  # messages: 39 gaps, 0.975 s recorded
 #: waiting thread after at most sys.getswitchinterval() = 5 ms, so one wake-up can be
 #: late by one to two switch intervals; measured on this shared 2-core machine: median
 #: 0.02 ms, worst 8.3 ms when idle; with both cores busy with other processes an OS
-#: preemption delayed single wake-ups by up to 38 ms (median 4.9 ms).  So: 90 % of the
-#: gaps within 15 ms, none beyond 100 ms (a scheduler time slice on a loaded machine),
-#: and the median below 5 ms (a replay at fixed spacing would err by 15 ms in median).
-GAP_TOLERANCE_S = 0.015
+#: preemption delayed single wake-ups by up to 38 ms (median 4.9 ms); one fresh-clone
+#: CI run of the whole suite had a 90th percentile of 20.0 ms, four whole switch
+#: intervals (errors of 5.0, 10.0, 15.0 and 20.0 ms).  So: 90 % of the gaps within
+#: 25 ms (five switch intervals), none beyond 100 ms (a scheduler time slice on a loaded
+#: machine), and the median below 5 ms (a replay at fixed spacing would err by 15 ms in
+#: median, and that is what the median check catches).
+GAP_TOLERANCE_S = 0.025
 WORST_GAP_TOLERANCE_S = 0.100
 MEDIAN_TOLERANCE_S = 0.005
 
