@@ -44,9 +44,11 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None,
     args : list of str, optional
         Command-line arguments (``--ros-args ...``); default ``sys.argv``.
     multithreaded : bool
-        A MultiThreadedExecutor, for nodes whose callbacks wait on other callbacks
-        (a service callback that calls a service or waits for a topic); otherwise a
-        SingleThreadedExecutor, the cheaper per callback.
+        A MultiThreadedExecutor, for nodes with callbacks that run long (an
+        optimisation, a batch of simulations) while goal, cancel or parameter
+        requests must still be answered; otherwise a SingleThreadedExecutor, the
+        cheaper per callback.  (Service calls made from a callback spin a private
+        executor, ``_service_calls.ServiceCaller``, so they need neither.)
     """
     rclpy.init(args=args)
     node = make_node()
