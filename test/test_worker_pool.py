@@ -27,22 +27,29 @@ def wait(future, timeout_s=300.0):
     return future.result()
 
 
-def start_worker(name):
+def start_worker(name, log_dir):
     exe = [sys.executable, '-m', 'suspension_tuning.nodes.full_vehicle_sim']
+    log = open(log_dir / f'{name}.log', 'w')  # noqa: SIM115 - closed with the process
     return subprocess.Popen([*exe, '--ros-args', '-r', f'__node:={name}',
                              '-p', 'telemetry_decimation:=50'],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                            stdout=log, stderr=subprocess.STDOUT)
+
+
+def worker_logs(log_dir):
+    """The workers' output, for the message of a failed assertion."""
+    return '\n'.join(f'--- {path.name}\n{path.read_text()[-3000:]}'
+                     for path in sorted(log_dir.glob('*.log')))
 
 
 def test_optimisation_survives_a_killed_worker_and_fails_clearly_without_any(
-        ros_context, executor):
+        ros_context, executor, tmp_path):
     from rclpy.action import ActionClient
     from rclpy.node import Node
     from suspension_tuning_interfaces.action import Optimise
 
     from suspension_tuning.nodes.coordinator import CoordinatorNode
 
-    workers = {name: start_worker(name) for name in ('sim_0', 'sim_1')}
+    workers = {name: start_worker(name, tmp_path) for name in ('sim_0', 'sim_1')}
     try:
         coordinator = CoordinatorNode(context=ros_context, parameter_overrides=[
             Parameter('sim_workers', value=['/sim_0', '/sim_1']),
@@ -71,9 +78,9 @@ def test_optimisation_survives_a_killed_worker_and_fails_clearly_without_any(
         result = wait(handle.get_result_async()).result
         assert killed.is_set()
         assert result.success or 'maximum number of iterations' in result.message, \
-            result.message
+            result.message + '\n' + worker_logs(tmp_path)
         assert result.iterations >= 1 and len(result.x) == 2
-        assert coordinator.pool.alive == ['/sim_1']
+        assert coordinator.pool.alive == ['/sim_1'], worker_logs(tmp_path)
         # Now the last worker dies too: the goal fails with a clear error.
         workers['sim_1'].send_signal(signal.SIGKILL)
         workers['sim_1'].wait(timeout=10)
