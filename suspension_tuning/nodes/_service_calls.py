@@ -21,6 +21,18 @@ from rclpy.node import Node
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
 
+def rename_only(name: str) -> list[str]:
+    """Node arguments that keep a helper node's own name under a global rename.
+
+    ``ros2 run ... --ros-args -r __node:=sim_1`` renames every node of the process;
+    a helper node (private clients, a closed loop) would then share its owner's name
+    (two ``/sim_1`` nodes, duplicate parameter services, one rosout logger).  A
+    node-local ``__node`` remap takes precedence over the global one, while the
+    process's topic and service remaps still apply.
+    """
+    return ['--ros-args', '-r', f'__node:={name}']
+
+
 class ServiceCallError(RuntimeError):
     """A service did not answer: not available, timed out, or vanished."""
 
@@ -60,8 +72,10 @@ class ServiceCaller:
 
     def __init__(self, node: Node) -> None:
         self.owner = node
-        self.node = rclpy.create_node(f'_{node.get_name()}_calls', context=node.context,
+        name = f'_{node.get_name()}_calls'
+        self.node = rclpy.create_node(name, context=node.context,
                                       namespace=node.get_namespace(),
+                                      cli_args=rename_only(name),
                                       start_parameter_services=False, enable_rosout=False)
         self.executor = SingleThreadedExecutor(context=node.context)
         self.executor.add_node(self.node)
