@@ -227,7 +227,3 @@ def comfort_filtered(acc: np.ndarray, fs: float) -> np.ndarray:
     from scipy import signal
 
     return signal.sosfilt(comfort.wb_sos(fs), acc, axis=-1)
-
-
-
-

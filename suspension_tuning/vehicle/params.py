@@ -19,10 +19,6 @@ CONFIG_DIR = config_dir()
 LITRE_M3 = 1.0e-3
 
 
-def _read_yaml(path: str | Path) -> dict[str, Any]:
-    return read_yaml(path)
-
-
 @dataclass(frozen=True)
 class StrutParams:
     """4S4 strut parameters (config/strut_4s4.yaml)."""
@@ -250,9 +246,9 @@ def load_vehicle_params(
     path = Path(path) if path is not None else CONFIG_DIR / 'vehicle.yaml'
     strut_path = Path(strut_path) if strut_path is not None else path.parent / 'strut_4s4.yaml'
     tyre_path = Path(tyre_path) if tyre_path is not None else path.parent / 'tyre.yaml'
-    d = _read_yaml(path)
-    strut = StrutParams.from_yaml_dict(_read_yaml(strut_path))
-    tyre = TyreParams.from_yaml_dict(_read_yaml(tyre_path))
+    d = read_yaml(path)
+    strut = StrutParams.from_yaml_dict(read_yaml(strut_path))
+    tyre = TyreParams.from_yaml_dict(read_yaml(tyre_path))
     geo, mass, inert = d['geometry'], d['mass'], d['inertia']
     tor, arb, seats = d['body_torsion'], d['anti_roll_bar'], d['seats']
     steer, lon, integ = d['steering'], d['longitudinal'], d['integration']
@@ -313,4 +309,4 @@ def load_vehicle_params(
 def load_scenarios_config(path: str | Path | None = None) -> dict[str, Any]:
     """Load config/scenarios.yaml as a plain mapping (units in the key names)."""
     path = Path(path) if path is not None else CONFIG_DIR / 'scenarios.yaml'
-    return _read_yaml(path)
+    return read_yaml(path)

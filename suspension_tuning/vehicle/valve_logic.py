@@ -23,9 +23,7 @@ import math
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-import yaml
-
-from suspension_tuning.paths import config_dir
+from suspension_tuning.paths import config_dir, read_yaml
 
 SPRING_SOFT = 0
 SPRING_STIFF = 1
@@ -79,7 +77,7 @@ class ValveControllerParams:
     @classmethod
     def from_yaml(cls, path: str | Path = DEFAULT_CONFIG) -> ValveControllerParams:
         """Read the ``ros__parameters`` of the valve_controller node's YAML file."""
-        data = yaml.safe_load(Path(path).read_text())
+        data = read_yaml(path)
         for node in data.values():
             if isinstance(node, dict) and 'ros__parameters' in node:
                 return cls.from_dict(node['ros__parameters'])
