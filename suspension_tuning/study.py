@@ -587,12 +587,9 @@ def write_bag(path: Path, run: StudyRun, recorder: _Recorder) -> Path:
 
     from suspension_tuning.bag.recorder import run_config_metadata
     from suspension_tuning.bag.writer import BagWriter, qos_profile_dict
-    from suspension_tuning.nodes.coordinator import code_version
+    from suspension_tuning.nodes.coordinator import configuration_yaml
 
-    files = {p.name: yaml.safe_load(p.read_text()) for p in sorted(config_dir().glob('*.yaml'))}
-    text = yaml.safe_dump(run_config(run), sort_keys=False) + yaml.safe_dump(
-        {'vehicle_configuration': files, 'code_version': code_version()}, sort_keys=False
-    )
+    text = yaml.safe_dump(run_config(run), sort_keys=False) + configuration_yaml()
     latched = qos_profile_dict(durability='transient_local', depth=1)
     reliable = qos_profile_dict(depth=100)
     physical = physical_settings(run.x)

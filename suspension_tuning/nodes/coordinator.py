@@ -22,7 +22,6 @@ import time
 from typing import Any
 
 import numpy as np
-import yaml
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
@@ -39,7 +38,7 @@ from suspension_tuning.nodes._service_calls import (
 )
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.dynamic_q import load_options
-from suspension_tuning.paths import config_dir, dump_yaml
+from suspension_tuning.paths import config_dir, dump_yaml, read_yaml
 from suspension_tuning.tuning import (
     FullEvaluation,
     RunCounter,
@@ -64,6 +63,17 @@ def code_version() -> str:
     except (OSError, subprocess.SubprocessError):
         from suspension_tuning import __version__
         return __version__
+
+
+def configuration_yaml() -> str:
+    """The part of a run's configuration that is the same for every run, as YAML.
+
+    Every ``config/*.yaml`` file (the vehicle, the models, the optimiser and the other
+    nodes' parameter files) and the code version: what a bag needs to say which model
+    produced it.  YAML in pure Python costs tens of ms, so callers dump it once.
+    """
+    files = {path.name: read_yaml(path) for path in sorted(CONFIG_DIR.glob('*.yaml'))}
+    return dump_yaml({'vehicle_configuration': files, 'code_version': code_version()})
 
 
 def record_to_msg(record: dict[str, Any], counter: RunCounter, t0: float) -> IterationRecord:
@@ -110,12 +120,8 @@ class CoordinatorNode(Node):
         self.config_pub = self.create_publisher(String, '/optimisation/run_config', LATCHED)
         self.result_pub = self.create_publisher(Optimise.Result, '/optimisation/result',
                                                 LATCHED)
-        # Read and dumped once: the configuration a run records does not change while the
-        # node runs (YAML in pure Python costs tens of ms, paid at start-up, not per run).
-        files = {path.name: yaml.safe_load(path.read_text())
-                 for path in sorted(CONFIG_DIR.glob('*.yaml'))}
-        self.static_config_yaml = dump_yaml(
-            {'vehicle_configuration': files, 'code_version': code_version()})
+        # Dumped once: the configuration a run records does not change while the node runs.
+        self.static_config_yaml = configuration_yaml()
         self.server = ActionServer(self, Optimise, '~/optimise', execute_callback=self._execute,
                                    goal_callback=lambda _: GoalResponse.ACCEPT,
                                    cancel_callback=lambda _: CancelResponse.ACCEPT,
