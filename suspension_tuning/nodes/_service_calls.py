@@ -21,16 +21,32 @@ from rclpy.node import Node
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
 
-def rename_only(name: str) -> list[str]:
-    """Node arguments that keep a helper node's own name under a global rename.
+def helper_node(owner: Node, name: str, **node_options: Any
+                ) -> tuple[Node, SingleThreadedExecutor]:
+    """A node of ``owner``'s process with an executor of its own, spun by whoever waits.
 
-    ``ros2 run ... --ros-args -r __node:=sim_1`` renames every node of the process;
-    a helper node (private clients, a closed loop) would then share its owner's name
-    (two ``/sim_1`` nodes, duplicate parameter services, one rosout logger).  A
-    node-local ``__node`` remap takes precedence over the global one, while the
-    process's topic and service remaps still apply.
+    For work a callback must finish without its own executor's help (service calls
+    from a callback, a step-locked closed loop): the waiting thread spins the helper's
+    executor itself, as ``rclpy.spin_until_future_complete`` does.  The helper lives in
+    the owner's namespace and context and keeps ``name`` under a global
+    ``-r __node:=...`` rename (which would otherwise make it a second node of the
+    owner's name: duplicate parameter services, one rosout logger), through a
+    node-local remap that takes precedence while topic and service remaps still apply.
+
+    Parameters
+    ----------
+    owner : rclpy.node.Node
+        The node the helper works for.
+    name : str
+        The helper node's name.
+    **node_options
+        Further ``rclpy.create_node`` options (e.g. ``start_parameter_services``).
     """
-    return ['--ros-args', '-r', f'__node:={name}']
+    node = rclpy.create_node(name, context=owner.context, namespace=owner.get_namespace(),
+                             cli_args=['--ros-args', '-r', f'__node:={name}'], **node_options)
+    executor = SingleThreadedExecutor(context=owner.context)
+    executor.add_node(node)
+    return node, executor
 
 
 class ServiceCallError(RuntimeError):
@@ -72,13 +88,9 @@ class ServiceCaller:
 
     def __init__(self, node: Node) -> None:
         self.owner = node
-        name = f'_{node.get_name()}_calls'
-        self.node = rclpy.create_node(name, context=node.context,
-                                      namespace=node.get_namespace(),
-                                      cli_args=rename_only(name),
-                                      start_parameter_services=False, enable_rosout=False)
-        self.executor = SingleThreadedExecutor(context=node.context)
-        self.executor.add_node(self.node)
+        self.node, self.executor = helper_node(node, f'_{node.get_name()}_calls',
+                                               start_parameter_services=False,
+                                               enable_rosout=False)
         self._lock = threading.Lock()
 
     def create_client(self, srv_type: Any, name: str) -> Any:

@@ -29,8 +29,6 @@ import math
 import time
 
 import numpy as np
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_services_default
 from rclpy.service_introspection import ServiceIntrospectionState
@@ -40,7 +38,7 @@ from suspension_tuning_interfaces.msg import TimeHistories, ValveState, VehicleS
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
 from suspension_tuning import evaluation, simplified_inputs
-from suspension_tuning.nodes._service_calls import rename_only
+from suspension_tuning.nodes._service_calls import helper_node
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.vehicle.simplified import SimplifiedInputs
 
@@ -124,12 +122,7 @@ class FullVehicleSimNode(Node):
         self.declare_parameter('telemetry_decimation', 2)
         self.declare_parameter('valve_controller', 'ros')
         self.declare_parameter('closed_loop_timeout_s', 5.0)
-        loop_name = f'{self.get_name()}_closed_loop'
-        self.loop_node = rclpy.create_node(loop_name, context=self.context,
-                                           namespace=self.get_namespace(),
-                                           cli_args=rename_only(loop_name))
-        self.loop_executor = SingleThreadedExecutor(context=self.context)
-        self.loop_executor.add_node(self.loop_node)
+        self.loop_node, self.loop_executor = helper_node(self, f'{self.get_name()}_closed_loop')
         self.clock_pub = self.loop_node.create_publisher(Clock, '/clock', 10)
         self.state_pub = self.loop_node.create_publisher(VehicleState, '/vehicle/state',
                                                          RELIABLE)
