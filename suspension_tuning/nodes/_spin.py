@@ -15,17 +15,30 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 
 
-def spin_until_shutdown(executor: Executor) -> None:
-    """Spin until Ctrl-C or the context shuts down, whichever way that shows.
+def spin_until_shutdown(executor: Executor,
+                        until: Callable[[], bool] | None = None) -> None:
+    """Spin until Ctrl-C or the context shuts down (or ``until()`` turns true).
 
     Ctrl-C normally raises KeyboardInterrupt here, or ExternalShutdownException once
     rclpy's signal handler has shut the context down.  When the interrupt lands in a
     ``__del__`` (e.g. of an rclpy Future) Python prints and drops it, the context is
     shut down all the same, and the next spin fails to build its wait set with an
     RCLError: that is a shutdown too, not a crash.
+
+    Parameters
+    ----------
+    executor : rclpy.executors.Executor
+        The executor to spin.
+    until : callable, optional
+        Checked every 0.1 s; spinning stops when it returns True (e.g. a node's work
+        is done).  Without it the executor spins until shutdown.
     """
     try:
-        executor.spin()
+        if until is None:
+            executor.spin()
+        else:
+            while executor.context.ok() and not until():
+                executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except _rclpy.RCLError:

@@ -25,13 +25,14 @@ import time
 
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
 from suspension_tuning.bag.definitions import DefinitionNotFoundError, message_class
 from suspension_tuning.bag.reader import BagContents, read_messages
+from suspension_tuning.nodes._spin import spin_until_shutdown
 
 #: Depth used when the bag records no offered QoS (rosbag2's Rosbag2QoS default, keep
 #: last 10, reliable, volatile: jazzy rosbag2_transport qos.hpp).
@@ -192,11 +193,11 @@ def main(args: list[str] | None = None) -> None:
     executor = MultiThreadedExecutor(num_threads=2)
     executor.add_node(node)
     try:
-        while rclpy.ok() and not node.done.is_set():
-            executor.spin_once(timeout_sec=0.1)
-        # Let reliable subscribers fetch the last samples before the publishers go.
-        time.sleep(0.2)
-    except (KeyboardInterrupt, ExternalShutdownException):
+        spin_until_shutdown(executor, until=node.done.is_set)
+        if node.done.is_set():
+            # Let reliable subscribers fetch the last samples before the publishers go.
+            time.sleep(0.2)
+    except KeyboardInterrupt:  # Ctrl-C during that last wait
         pass
     finally:
         node.destroy_node()
