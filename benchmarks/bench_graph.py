@@ -127,18 +127,14 @@ class Graph:
 
     def run(self) -> tuple[float, object]:
         """One optimisation from an empty calibration cache; (wall time, result)."""
+        from suspension_tuning.nodes._service_calls import wait_future
+
         shutil.rmtree(self.cache)
         os.mkdir(self.cache)
-        done = threading.Event()
         start = time.perf_counter()
-        goal = self.client.send_goal_async(self.goal)
-        goal.add_done_callback(lambda _: done.set())
-        done.wait()
-        done.clear()
-        outcome = goal.result().get_result_async()
-        outcome.add_done_callback(lambda _: done.set())
-        done.wait()
-        return time.perf_counter() - start, outcome.result().result
+        handle = wait_future(self.client.send_goal_async(self.goal))
+        result = wait_future(handle.get_result_async()).result
+        return time.perf_counter() - start, result
 
     def bare_round_trip_s(self, calls: int = 200) -> float:
         """Median time of a call to the simulation worker's get_parameters service.
