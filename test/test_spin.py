@@ -37,3 +37,25 @@ def test_a_wait_set_error_while_the_context_is_up_is_raised():
             spin_until_shutdown(executor)
     finally:
         context.shutdown()
+
+
+def test_spinning_until_done_stops_when_the_condition_holds_or_the_context_goes():
+    context, executor = _executor_failing_with_rcl_error(shut_down_first=True)
+    spins = []
+
+    def spin_once(timeout_sec=None):
+        spins.append(timeout_sec)
+        if len(spins) == 3:  # the third wait meets a context shut down under it
+            context.shutdown()
+            raise _rclpy.RCLError('failed to initialize wait set')
+
+    executor.spin_once = spin_once
+    spin_until_shutdown(executor, until=lambda: False)
+    assert spins == [0.1, 0.1, 0.1]
+    context, executor = _executor_failing_with_rcl_error(shut_down_first=False)
+    executor.spin_once = lambda timeout_sec=None: pytest.fail('spun although done')
+    try:
+        spin_until_shutdown(executor, until=lambda: True)  # done already: returns
+        assert context.ok()
+    finally:
+        context.shutdown()
