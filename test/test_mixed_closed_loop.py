@@ -73,6 +73,8 @@ def test_closed_loop_over_topics_gives_the_in_process_bits(ros_context, executor
     assert done.wait(240.0)
     response = future.result()
     assert response.success, response.error
+    np.testing.assert_array_equal(response.f, in_process.f)  # same bits as in-process
+    np.testing.assert_array_equal(np.reshape(response.g, (1, 4)), in_process.g)
     valve_executor.shutdown(timeout_sec=5.0)
     valves.destroy_node()
     # The valve controller node's own record of what it commanded and when each
