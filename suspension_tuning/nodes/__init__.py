@@ -1,11 +1,11 @@
 """Thin rclpy adapters over the physics and the optimiser.
 
-Importing this package limits glibc's malloc to one arena (see
-:func:`suspension_tuning.nodes._memory.share_malloc_arena`): the models run in
-executor threads, and per-thread arenas give their tens of megabytes back to the
-kernel after every run, so that every run page-faults them in again.
+Importing this package sets glibc's malloc to one arena that keeps its heap (see
+:func:`suspension_tuning.nodes._memory.tune_malloc`): the models run in executor
+threads, and otherwise glibc gives their tens of megabytes back to the kernel after
+a run, so that the next run page-faults them in again.
 """
 
-from suspension_tuning.nodes._memory import share_malloc_arena
+from suspension_tuning.nodes._memory import tune_malloc
 
-share_malloc_arena()
+tune_malloc()
