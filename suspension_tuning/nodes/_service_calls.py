@@ -141,8 +141,12 @@ class ServiceCaller:
                     pending[i] = client.call_async(request)
             deadline = time.monotonic() + timeout_s
             while pending:
-                # Short spins: a worker that vanishes is noticed within 0.1 s.
-                self.executor.spin_once(timeout_sec=0.1)
+                # A worker that vanishes is noticed within a second.  Shorter spins cost
+                # the model: each wake-up of this thread takes the GIL from the thread
+                # running the model in a burst of hand-overs of about 4 ms (measured
+                # with 0.1 s spins: about 1,000 time slices per 0.7 s batch, and the
+                # batch 50-70 ms slower than with no waiting thread).
+                self.executor.spin_once(timeout_sec=1.0)
                 expired = time.monotonic() > deadline
                 for i, future in list(pending.items()):
                     client = calls[i][0]
