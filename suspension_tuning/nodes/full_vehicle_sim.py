@@ -30,8 +30,7 @@ import time
 
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_services_default
-from rclpy.service_introspection import ServiceIntrospectionState
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
 from suspension_tuning_interfaces.msg import TimeHistories, ValveState, VehicleState
@@ -39,6 +38,7 @@ from suspension_tuning_interfaces.srv import EvaluateDesign
 
 from suspension_tuning import evaluation, simplified_inputs
 from suspension_tuning.nodes._service_calls import helper_node
+from suspension_tuning.nodes._service_thread import ServiceThread
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.vehicle.simplified import SimplifiedInputs
 
@@ -129,9 +129,9 @@ class FullVehicleSimNode(Node):
         self.valve_answers: dict[int, tuple[int, int, int, int]] = {}
         self.loop_node.create_subscription(ValveState, '/suspension/valve_state',
                                            self._on_valve_state, RELIABLE)
-        service = self.create_service(EvaluateDesign, '~/evaluate', self._on_evaluate)
-        service.configure_introspection(self.get_clock(), qos_profile_services_default,
-                                        ServiceIntrospectionState.CONTENTS)
+        # Served on a thread of its own (no executor in the path of a request).
+        self.evaluate_service = ServiceThread(self, EvaluateDesign, 'evaluate',
+                                              self._on_evaluate)
         self.pub = {name: self.create_publisher(kind, f'~/telemetry/{name}', TELEMETRY)
                     for name, kind in (('imu', Imu), ('struts', JointState),
                                        ('tyres', JointState), ('seats', JointState),
@@ -188,7 +188,8 @@ class FullVehicleSimNode(Node):
                                              msg.rear_spring, msg.rear_damping)
 
     def destroy_node(self) -> None:
-        """Destroy the closed-loop node and its executor too."""
+        """Destroy the evaluate service's thread and the closed-loop node too."""
+        self.evaluate_service.destroy()
         self.loop_executor.shutdown(timeout_sec=1.0)
         self.loop_node.destroy_node()
         super().destroy_node()

@@ -19,14 +19,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
-from rclpy.qos import qos_profile_services_default
-from rclpy.service_introspection import ServiceIntrospectionState
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateDesign, EvaluateGradient
 
 from suspension_tuning import simplified_inputs
 from suspension_tuning.nodes._service_calls import ServiceCaller, ServiceCallError
+from suspension_tuning.nodes._service_thread import ServiceThread
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.scaling import Scaling, scaling_key
 from suspension_tuning.optim.simplified_gradient import (
@@ -57,12 +55,11 @@ class GradientEvaluatorNode(Node):
         self.sim_client = self.caller.create_client(EvaluateDesign,
                                                     str(self.get_parameter('sim_service').value))
         self.simplified_runs = 0
-        for name, kind, callback in (('~/gradient', EvaluateGradient, self._on_gradient),
-                                     ('~/calibrate', Calibrate, self._on_calibrate)):
-            service = self.create_service(kind, name, callback,
-                                          callback_group=ReentrantCallbackGroup())
-            service.configure_introspection(self.get_clock(), qos_profile_services_default,
-                                            ServiceIntrospectionState.CONTENTS)
+        # Each served on a thread of its own: a gradient is answered while a
+        # calibration runs, and no executor is in the path of a request.
+        self.service_threads = [ServiceThread(self, kind, name, callback) for name, kind, callback
+                         in (('gradient', EvaluateGradient, self._on_gradient),
+                             ('calibrate', Calibrate, self._on_calibrate))]
 
     # ---------------------------------------------------------------- calibrate
     def _cache_path(self, key: dict) -> Path:
@@ -164,7 +161,9 @@ class GradientEvaluatorNode(Node):
 
 
     def destroy_node(self) -> None:
-        """Destroy the private client node too."""
+        """Destroy the service threads and the private client node too."""
+        for service in self.service_threads:
+            service.destroy()
         self.caller.destroy()
         super().destroy_node()
 

@@ -1,0 +1,67 @@
+"""A service on a thread of its own (suspension_tuning.nodes._service_thread)."""
+
+import rclpy
+from suspension_tuning_interfaces.srv import EvaluateDesign
+
+from suspension_tuning.nodes._service_calls import ServiceCaller
+from suspension_tuning.nodes._service_thread import ServiceThread
+
+
+def _echo(request, response):
+    """Answer with the number of designs; a NaN design makes the callback raise."""
+    if any(v != v for v in request.designs):
+        raise ZeroDivisionError('a NaN design')
+    response.success = True
+    response.n_designs = len(request.designs) // request.n_vars
+    return response
+
+
+def _request(*designs: float) -> EvaluateDesign.Request:
+    return EvaluateDesign.Request(scenario='ride', n_vars=2, designs=list(designs))
+
+
+def test_the_service_is_answered_under_the_owners_name_with_no_executor(ros_context):
+    owner = rclpy.create_node('owner', namespace='/ns', context=ros_context)
+    service = ServiceThread(owner, EvaluateDesign, 'evaluate', _echo)
+    caller = ServiceCaller(owner)
+    try:
+        assert service.service_name == '/ns/owner/evaluate'
+        client = caller.create_client(EvaluateDesign, '/ns/owner/evaluate')
+        # 6 values of 2 variables: 3 designs.
+        response = caller.call(client, _request(0.1, 0.2, 0.3, 0.4, 0.5, 0.6), 10.0, 10.0)
+        assert response.success and response.n_designs == 3
+        assert service.calls == 1
+    finally:
+        caller.destroy()
+        service.destroy()
+        owner.destroy_node()
+
+
+def test_a_callback_that_raises_is_answered_with_the_error_and_serving_goes_on(ros_context):
+    owner = rclpy.create_node('owner', context=ros_context)
+    service = ServiceThread(owner, EvaluateDesign, 'evaluate', _echo)
+    caller = ServiceCaller(owner)
+    try:
+        client = caller.create_client(EvaluateDesign, '/owner/evaluate')
+        failed = caller.call(client, _request(float('nan'), 0.5), 10.0, 10.0)
+        assert not failed.success
+        assert failed.error == 'ZeroDivisionError: a NaN design'
+        assert caller.call(client, _request(0.5, 0.5), 10.0).n_designs == 1
+        assert service.calls == 2
+    finally:
+        caller.destroy()
+        service.destroy()
+        owner.destroy_node()
+
+
+def test_the_thread_stops_on_destroy_and_on_context_shutdown(ros_context):
+    owner = rclpy.create_node('owner', context=ros_context)
+    first = ServiceThread(owner, EvaluateDesign, 'first', _echo)
+    second = ServiceThread(owner, EvaluateDesign, 'second', _echo)
+    first.destroy()
+    assert not first._thread.is_alive()
+    ros_context.shutdown()  # wakes the waiting thread through its guard condition
+    second._thread.join(5.0)
+    assert not second._thread.is_alive()
+    second.destroy()  # after shutdown: no error, nothing left to stop
+    owner.destroy_node()
