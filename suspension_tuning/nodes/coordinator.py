@@ -31,6 +31,7 @@ from suspension_tuning_interfaces.action import Optimise
 from suspension_tuning_interfaces.msg import IterationRecord
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
+from suspension_tuning.nodes import _logging
 from suspension_tuning.nodes._service_calls import (
     ServiceCaller,
     ServiceCallError,
@@ -190,8 +191,8 @@ class CoordinatorNode(Node):
         except ValueError as error:
             goal_handle.abort()
             return Optimise.Result(success=False, message=f'bad goal: {error}')
-        self.get_logger().info(f'optimising {request.scenario} with {request.n_vars} '
-                               f'variables, {request.gradient_source} gradients')
+        _logging.info(self, f'optimising {request.scenario} with {request.n_vars} '
+                            f'variables, {request.gradient_source} gradients')
         self._publish_run_config(request)
         counter = RunCounter()
         history_msgs: list[IterationRecord] = []

@@ -23,6 +23,7 @@ from rclpy.node import Node
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateDesign, EvaluateGradient
 
 from suspension_tuning import simplified_inputs
+from suspension_tuning.nodes import _logging
 from suspension_tuning.nodes._service_calls import ServiceCaller, ServiceCallError
 from suspension_tuning.nodes._service_thread import ServiceThread
 from suspension_tuning.nodes._spin import run_node
@@ -102,7 +103,8 @@ class GradientEvaluatorNode(Node):
             response.r_squared.append(float(function.r2))
         response.success = True
         response.wall_time_s = time.monotonic() - start
-        self.get_logger().info(
+        _logging.info(
+            self,
             f'{scenario}/{n_vars} calibrated ({"cache" if response.from_cache else "full runs"}): '
             + ', '.join(f'{f.name} R2={f.r2:.3f}' for f in scaling.functions))
         return response

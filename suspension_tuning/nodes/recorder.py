@@ -43,6 +43,7 @@ from suspension_tuning.bag.definitions import (
 )
 from suspension_tuning.bag.recorder import RecordingSession
 from suspension_tuning.bag.writer import qos_profile_dict
+from suspension_tuning.nodes import _logging
 from suspension_tuning.nodes._spin import run_node
 
 #: Depth of the recorder's subscriptions: deep enough that a burst of telemetry (a 20 s
@@ -209,13 +210,13 @@ class RecorderNode(Node):
             self.get_logger().error(f'message on {topic} not recorded: {exc!r}')
             return
         self.received += 1
-        if closed is not None:
-            self.get_logger().info(f'bag closed: {closed}')
+        if closed is not None:  # once per run, on the message thread: the fast path
+            _logging.info(self, f'bag closed: {closed}')
 
     def _flush(self) -> None:
         closed = self.session.flush()
         if closed is not None:
-            self.get_logger().info(f'bag closed: {closed}')
+            _logging.info(self, f'bag closed: {closed}')
 
     def close(self) -> None:
         """Finalise the open bag."""
