@@ -11,7 +11,7 @@ calibration from 30 full-model samples included) twice:
   untimed warm-up goal first starts its worker threads.
 
 Prints ``name: value`` lines, ending with ``ros_overhead_fraction`` = graph wall time /
-in-process wall time - 1 (target <= 0.02): the median over 12 pairs of runs made
+in-process wall time - 1 (target <= 0.02): the median over 20 pairs of runs made
 next to each other, in alternating order, so that the machine's drift of its speed
 (+-10 % over minutes on a shared machine) cancels within a pair; the interquartile
 range of the pairs and the ratio of the two medians are printed too.  Both runs must
@@ -37,7 +37,7 @@ import numpy as np  # noqa: E402
 # As in the node executables: one malloc arena, set before any thread allocates.
 import suspension_tuning.nodes  # noqa: E402, F401
 
-SCENARIO, N_VARS, SAMPLES, REPEATS = 'ride', 2, 30, 12
+SCENARIO, N_VARS, SAMPLES, REPEATS = 'ride', 2, 30, 20
 
 
 class ModelClock:
@@ -139,8 +139,10 @@ class Graph:
     def bare_round_trip_s(self, calls: int = 200) -> float:
         """Median time of a call to the simulation worker's get_parameters service.
 
-        The same path as an evaluate call (the coordinator's private caller, the
-        worker's executor) without a model run or logging.
+        From the coordinator's private caller, as an evaluate call, to the worker
+        node's executor (evaluate itself has a thread of its own,
+        ``nodes/_service_thread.py``, about 0.2 ms quicker per call), without a model
+        run or logging.
         """
         from rcl_interfaces.srv import GetParameters
 
