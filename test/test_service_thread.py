@@ -1,9 +1,10 @@
 """A service on a thread of its own (suspension_tuning.nodes._service_thread)."""
 
+import pytest
 import rclpy
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
-from suspension_tuning.nodes._service_calls import ServiceCaller
+from suspension_tuning.nodes._service_calls import ServiceCaller, ServiceCallError
 from suspension_tuning.nodes._service_thread import ServiceThread
 
 
@@ -65,3 +66,25 @@ def test_the_thread_stops_on_destroy_and_on_context_shutdown(ros_context):
     assert not second._thread.is_alive()
     second.destroy()  # after shutdown: no error, nothing left to stop
     owner.destroy_node()
+
+
+def test_a_callback_returning_no_response_leaves_the_call_unanswered_not_the_thread_dead(
+        ros_context):
+    owner = rclpy.create_node('owner', context=ros_context)
+    answers = iter([None])  # first call: no response object; afterwards: _echo
+
+    def callback(request, response):
+        return next(answers, _echo(request, response))
+
+    service = ServiceThread(owner, EvaluateDesign, 'evaluate', callback)
+    caller = ServiceCaller(owner)
+    try:
+        client = caller.create_client(EvaluateDesign, '/owner/evaluate')
+        with pytest.raises(ServiceCallError, match='no response within 1.0 s'):
+            caller.call(client, _request(0.5, 0.5), 1.0, 10.0)
+        assert caller.call(client, _request(0.5, 0.5), 10.0).n_designs == 1
+        assert service.calls == 1  # the response that could be sent
+    finally:
+        caller.destroy()
+        service.destroy()
+        owner.destroy_node()

@@ -23,6 +23,7 @@ owner's executor stays free for its parameters, topics and actions.
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -108,32 +109,42 @@ class ServiceThread:
     def _serve(self) -> None:
         logger = self.owner.get_logger()
         while not self._stopping:
-            if not self._wait():
-                continue
             try:
+                if not self._wait():
+                    continue
                 with self.service.handle:
                     request, header = self.service.handle.service_take_request(
                         self.srv_type.Request)
-            except InvalidHandle:
+            except InvalidHandle:  # destroyed under the wait
                 return
-            if request is None:  # taken by nobody else, but the middleware had none
+            except Exception as error:  # noqa: BLE001 - a wait or take that failed
+                if self._stopping or not self.owner.context.ok():
+                    return
+                logger.error(f'{self.service_name}: no request taken: {error}')
+                time.sleep(0.1)  # no hot loop if the failure persists
                 continue
+            if request is None:  # the middleware had nothing after all
+                continue
+            self._answer(request, header, logger)
+
+    def _answer(self, request: Any, header: Any, logger: Any) -> None:
+        """Run the callback and send its response (or the error, if it raised)."""
+        response = self.srv_type.Response()
+        try:
+            response = self.callback(request, response)
+        except Exception as error:  # noqa: BLE001 - answer, log, and serve on
+            logger.error(f'{self.service_name} failed: {type(error).__name__}: {error}')
             response = self.srv_type.Response()
-            try:
-                response = self.callback(request, response)
-            except Exception as error:  # noqa: BLE001 - answer, log, and serve on
-                logger.error(f'{self.service_name} failed: {type(error).__name__}: {error}')
-                response = self.srv_type.Response()
-                if hasattr(response, 'success') and hasattr(response, 'error'):
-                    response.success = False
-                    response.error = f'{type(error).__name__}: {error}'
-            try:
-                self.service.send_response(response, header)
-                self.calls += 1
-            except InvalidHandle:
-                return
-            except Exception as error:  # noqa: BLE001 - e.g. a field of the wrong type
-                logger.error(f'{self.service_name}: response not sent: {error}')
+            if hasattr(response, 'success') and hasattr(response, 'error'):
+                response.success = False
+                response.error = f'{type(error).__name__}: {error}'
+        try:
+            self.service.send_response(response, header)
+            self.calls += 1
+        except InvalidHandle:  # destroyed while the callback ran
+            pass
+        except Exception as error:  # noqa: BLE001 - e.g. a field of the wrong type
+            logger.error(f'{self.service_name}: response not sent: {error}')
 
     def destroy(self, timeout_s: float = 5.0) -> None:
         """Stop the thread (after a callback that is running) and destroy the service."""
