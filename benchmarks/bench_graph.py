@@ -104,15 +104,17 @@ class Graph:
         from rclpy.parameter import Parameter
         from suspension_tuning_interfaces.action import Optimise
 
-        from suspension_tuning.graph import SpinningGraph
+        from suspension_tuning.graph import SpinningGraph, model_service_loop
         from suspension_tuning.nodes.coordinator import CoordinatorNode
         from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
         from suspension_tuning.nodes.gradient_evaluator import GradientEvaluatorNode
 
         rclpy.init()
         self.cache = tempfile.mkdtemp(prefix='bench_graph_calibration_')
-        self.nodes = [FullVehicleSimNode(),
-                      GradientEvaluatorNode(parameter_overrides=[
+        # As graph.build_nodes: evaluate and gradient served on one thread.
+        loop = model_service_loop()
+        self.nodes = [FullVehicleSimNode(service_loop=loop),
+                      GradientEvaluatorNode(service_loop=loop, parameter_overrides=[
                           Parameter('calibration_dir', value=self.cache)]),
                       CoordinatorNode(parameter_overrides=[
                           Parameter('calibration_samples', value=SAMPLES),

@@ -23,6 +23,7 @@ from rclpy.executors import (
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from suspension_tuning.nodes._service_thread import ServiceLoop
 from suspension_tuning.nodes._spin import spin_until_shutdown
 
 
@@ -49,10 +50,16 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
     if workers < 1:
         raise ValueError(f'need at least one simulation worker, got {workers}')
     names = ['full_vehicle_sim'] if workers == 1 else [f'sim_{i}' for i in range(workers)]
-    nodes: list[Node] = [FullVehicleSimNode(name, context=context) for name in names]
+    # The first worker's evaluate and the gradient share one serving thread, so that
+    # the models run on one thread, as in-process (nodes/_service_thread.py).
+    loop = model_service_loop(context)
+    nodes: list[Node] = [FullVehicleSimNode(name, context=context,
+                                            service_loop=loop if i == 0 else None)
+                         for i, name in enumerate(names)]
     worker_param = Parameter('sim_workers', value=[f'/{name}' for name in names])
-    nodes.append(GradientEvaluatorNode(context=context, parameter_overrides=[
-        Parameter('sim_service', value=f'/{names[0]}/evaluate')]))
+    nodes.append(GradientEvaluatorNode(
+        context=context, service_loop=loop,
+        parameter_overrides=[Parameter('sim_service', value=f'/{names[0]}/evaluate')]))
     nodes.append(ValveControllerNode(context=context))
     nodes.append(CoordinatorNode(context=context, parameter_overrides=[worker_param]))
     if record:
@@ -62,15 +69,28 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
     return nodes
 
 
+def model_service_loop(context=None) -> ServiceLoop:
+    """The loop serving the first simulation worker's ``evaluate`` and the gradient.
+
+    Both models then run on one thread and share numba's OpenMP team, which stays
+    awake between them as in an in-process run; on two threads the gradient's team
+    sleeps through each full-model run, and each 4-design simplified batch took
+    1.5 ms longer (4.2 against 2.6-2.7 ms, ``benchmarks/bench_model_threads.py``).
+    The loop stops when both services are gone.
+    """
+    return ServiceLoop(context or rclpy.utilities.get_default_context(), 'models')
+
+
 class SpinningGraph:
     """The graph's nodes spinning in background threads, one executor per node.
 
     Every node but the coordinator gets a SingleThreadedExecutor: none of their
-    callbacks waits on another callback of the same executor (the service calls of
-    the gradient evaluator spin a private executor, ``_service_calls.ServiceCaller``),
-    and a callback then runs in the thread that took its request, with no hand-over
-    to a thread pool.  Measured on the 2-variable ride optimisation
-    (``benchmarks/bench_graph.py``): one shared MultiThreadedExecutor added 56 ms to
+    callbacks waits on another callback of the same executor (the hot services are
+    served outside the executors, ``nodes/_service_thread.py``, and service calls
+    take their own responses, ``_service_calls.ServiceCaller``), and a callback then
+    runs in the thread that took its request, with no hand-over to a thread pool.
+    Measured on the 2-variable ride optimisation (``benchmarks/bench_graph.py``):
+    one shared MultiThreadedExecutor added 56 ms to
     a 0.95 s run, one executor per node 38 ms.  The coordinator keeps a
     MultiThreadedExecutor: its action's execute callback runs for a whole
     optimisation while goal, cancel and parameter requests must still be served.

@@ -1,11 +1,13 @@
 """A service on a thread of its own (suspension_tuning.nodes._service_thread)."""
 
+import threading
+
 import pytest
 import rclpy
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
 from suspension_tuning.nodes._service_calls import ServiceCaller, ServiceCallError
-from suspension_tuning.nodes._service_thread import ServiceThread
+from suspension_tuning.nodes._service_thread import ServiceLoop, ServiceThread
 
 
 def _echo(request, response):
@@ -60,10 +62,10 @@ def test_the_thread_stops_on_destroy_and_on_context_shutdown(ros_context):
     first = ServiceThread(owner, EvaluateDesign, 'first', _echo)
     second = ServiceThread(owner, EvaluateDesign, 'second', _echo)
     first.destroy()
-    assert not first._thread.is_alive()
+    assert not first.loop.alive
     ros_context.shutdown()  # wakes the waiting thread through its guard condition
-    second._thread.join(5.0)
-    assert not second._thread.is_alive()
+    second.loop._thread.join(5.0)
+    assert not second.loop.alive
     second.destroy()  # after shutdown: no error, nothing left to stop
     owner.destroy_node()
 
@@ -87,4 +89,34 @@ def test_a_callback_returning_no_response_leaves_the_call_unanswered_not_the_thr
     finally:
         caller.destroy()
         service.destroy()
+        owner.destroy_node()
+
+
+def test_services_sharing_a_loop_run_on_one_thread_until_the_last_leaves(ros_context):
+    owner = rclpy.create_node('owner', context=ros_context)
+    threads: dict[str, set] = {'a': set(), 'b': set()}
+
+    def recording(key):
+        def callback(request, response):
+            threads[key].add(threading.get_ident())
+            return _echo(request, response)
+        return callback
+
+    loop = ServiceLoop(ros_context, 'shared')
+    a = ServiceThread(owner, EvaluateDesign, 'a', recording('a'), loop=loop)
+    b = ServiceThread(owner, EvaluateDesign, 'b', recording('b'), loop=loop)
+    caller = ServiceCaller(owner)
+    try:
+        client_a = caller.create_client(EvaluateDesign, '/owner/a')
+        client_b = caller.create_client(EvaluateDesign, '/owner/b')
+        for client in (client_a, client_b, client_a):
+            assert caller.call(client, _request(0.5, 0.5), 10.0, 10.0).n_designs == 1
+        assert threads['a'] == threads['b'] and len(threads['a']) == 1
+        a.destroy()
+        assert loop.alive  # b is still served
+        assert caller.call(client_b, _request(0.5, 0.5), 10.0).success
+        b.destroy()
+        assert not loop.alive
+    finally:
+        caller.destroy()
         owner.destroy_node()

@@ -1,4 +1,4 @@
-"""A service served by a thread of its own, outside every executor.
+"""Services served by threads of their own, outside every executor.
 
 The graph's hot services (a simulation worker's ``evaluate``, the gradient
 evaluator's ``gradient`` and ``calibrate``) are called once or twice per Dynamic-Q
@@ -10,14 +10,22 @@ get_parameters round trip of a simulation node: 0.9 ms through its executor, 0.5
 through an executor of a node holding only that service, and 0.23 ms with the wait
 below (``benchmarks/bench_graph.py``, ``bare_round_trip_ms``).
 
-:class:`ServiceThread` does what the executor does for one service, and nothing else:
-a wait set of that service and a guard condition (for shutdown), ``take_request``,
-the callback, ``send_response`` (which also publishes the service-introspection
-events the recorder keeps).  The service sits on a hidden node of its own
+A :class:`ServiceLoop` does what an executor does for services, and nothing else: a
+wait set of its services and a guard condition (for changes and shutdown),
+``take_request``, the callback, ``send_response`` (which also publishes the
+service-introspection events the recorder keeps).  Callbacks run one at a time, in
+arrival order, as on a SingleThreadedExecutor; the owners' executors stay free for
+their parameters, topics and actions.
+
+A :class:`ServiceThread` is one service on a hidden node of its own
 (``_<node>_<service>``) that no executor spins, with the owner's full name, so clients
 and ``ros2 service`` see ``/<node>/<service>`` as before; global remaps still apply.
-Callbacks run one at a time, in arrival order, as on a SingleThreadedExecutor; the
-owner's executor stays free for its parameters, topics and actions.
+It has a loop of its own unless it is given one to share.  The graph in one process
+(``graph.build_nodes``) serves the first simulation worker's ``evaluate`` and the
+gradient evaluator's ``gradient`` on one loop, so that both models run on one thread
+and share numba's OpenMP team, as in-process: on a thread of its own, the gradient's
+team has slept since the previous iteration, and each 4-design simplified batch took
+1.5 ms longer (4.2 against 2.6-2.7 ms, ``benchmarks/bench_model_threads.py``).
 """
 
 from __future__ import annotations
@@ -25,6 +33,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
+from contextlib import ExitStack
 from typing import Any
 
 from rclpy.exceptions import InvalidHandle
@@ -37,8 +46,120 @@ from rclpy.service_introspection import ServiceIntrospectionState
 from suspension_tuning.nodes._service_calls import hidden_node
 
 
+class ServiceLoop:
+    """A thread serving services one request at a time (see the module docstring).
+
+    It stops when its last service is removed or when the context shuts down.
+
+    Parameters
+    ----------
+    context : rclpy.context.Context
+        Context of the services it will serve.
+    name : str
+        Names the thread (``serve <name>``).
+    """
+
+    def __init__(self, context: Any, name: str) -> None:
+        self.context = context
+        self._entries: list[ServiceThread] = []
+        self._lock = threading.Lock()
+        self._stopping = False
+        self._wake = GuardCondition(None, None, context=context)
+        self._wake_destroyed = False
+        context.on_shutdown(self._on_shutdown)
+        self._thread = threading.Thread(target=self._serve, name=f'serve {name}', daemon=True)
+        self._thread.start()
+
+    @property
+    def alive(self) -> bool:
+        """Whether the thread still runs."""
+        return self._thread.is_alive()
+
+    def add(self, entry: ServiceThread) -> None:
+        """Serve ``entry`` too (from the next wait on)."""
+        with self._lock:
+            self._entries.append(entry)
+        self._kick()
+
+    def remove(self, entry: ServiceThread, timeout_s: float = 5.0) -> None:
+        """Serve ``entry`` no more; the last one removed stops the thread."""
+        with self._lock:
+            if entry in self._entries:
+                self._entries.remove(entry)
+            last = not self._entries
+        if last:
+            self.stop(timeout_s)
+        else:
+            self._kick()
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Stop the thread (after a callback that is running)."""
+        if not self._stopping:
+            self._stopping = True
+            self._kick()
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout_s)
+        with self._lock:
+            if not self._wake_destroyed:
+                self._wake_destroyed = True
+                self._wake.destroy()
+
+    def _on_shutdown(self) -> None:
+        self._stopping = True
+        self._kick()
+
+    def _kick(self) -> None:
+        """Wake the wait (to rebuild it, or to stop)."""
+        try:
+            self._wake.trigger()
+        except InvalidHandle:  # destroyed: the thread has stopped already
+            pass
+
+    def _wait(self) -> list[ServiceThread]:
+        """Block until requests are in (their entries) or something changed ([])."""
+        with self._lock:
+            entries = list(self._entries)
+        context = self.context
+        with ExitStack() as handles:
+            live = []
+            for entry in entries:
+                try:
+                    handles.enter_context(entry.service.handle)
+                    live.append(entry)
+                except InvalidHandle:  # destroyed since: not waited on
+                    pass
+            handles.enter_context(self._wake.handle)
+            handles.enter_context(context.handle)
+            wait_set = _rclpy.WaitSet(0, 1, 0, 0, len(live), 0, context.handle)
+            wait_set.clear_entities()
+            for entry in live:
+                wait_set.add_service(entry.service.handle)
+            wait_set.add_guard_condition(self._wake.handle)
+            wait_set.wait(-1)  # no timeout: the guard condition wakes it
+            ready = wait_set.get_ready_entities('service')
+            return [entry for entry in live if entry.service.handle.pointer in ready]
+
+    def _serve(self) -> None:
+        while not self._stopping:
+            try:
+                ready = self._wait()
+            except Exception as error:  # noqa: BLE001 - a wait that failed
+                if self._stopping or not self.context.ok():
+                    return
+                with self._lock:
+                    entries = list(self._entries)
+                if entries:
+                    entries[0].owner.get_logger().error(f'service wait failed: {error}')
+                time.sleep(0.1)  # no hot loop if the failure persists
+                continue
+            for entry in ready:
+                if self._stopping:
+                    return
+                entry._take_and_answer()
+
+
 class ServiceThread:
-    """Serve ``srv_type`` at ``<owner's full name>/<name>`` on a thread of its own.
+    """Serve ``srv_type`` at ``<owner's full name>/<name>`` outside the owner's executor.
 
     Parameters
     ----------
@@ -52,16 +173,19 @@ class ServiceThread:
         ``callback(request, response) -> response``, as for ``Node.create_service``.
         An exception it raises is logged and answered with the empty response (with
         ``success = false`` and the error text where the type has those fields); the
-        thread serves on.
+        loop serves on.
     introspection : ServiceIntrospectionState
         Service-introspection events published for each call (default CONTENTS: the
         recorder keeps requests and responses).
+    loop : ServiceLoop, optional
+        The loop to be served by, shared with other services; default a loop (and
+        thread) of its own.
     """
 
     def __init__(self, owner: Node, srv_type: Any, name: str,
                  callback: Callable[[Any, Any], Any],
-                 introspection: ServiceIntrospectionState = ServiceIntrospectionState.CONTENTS
-                 ) -> None:
+                 introspection: ServiceIntrospectionState = ServiceIntrospectionState.CONTENTS,
+                 loop: ServiceLoop | None = None) -> None:
         self.owner = owner
         self.srv_type = srv_type
         self.callback = callback
@@ -73,62 +197,23 @@ class ServiceThread:
         self.service.configure_introspection(owner.get_clock(), qos_profile_services_default,
                                              introspection)
         self.calls = 0
-        self._stopping = False
-        self._wake = GuardCondition(None, None, context=owner.context)
-        owner.context.on_shutdown(self._on_shutdown)
-        self._thread = threading.Thread(target=self._serve, name=f'serve {self.service_name}',
-                                        daemon=True)
-        self._thread.start()
+        self.loop = loop or ServiceLoop(owner.context, self.service_name)
+        self.loop.add(self)
 
-    def _on_shutdown(self) -> None:
-        self._stop()
-
-    def _stop(self) -> None:
-        """Ask the thread to stop and wake it (once; a no-op after :meth:`destroy`)."""
-        if not self._stopping:
-            self._stopping = True
-            self._wake.trigger()
-
-    def _wait(self) -> bool:
-        """Block until a request is in (True) or the thread is to stop (False)."""
-        context = self.owner.context
-        try:
-            with self.service.handle, self._wake.handle, context.handle:
-                wait_set = _rclpy.WaitSet(0, 1, 0, 0, 1, 0, context.handle)
-                wait_set.clear_entities()
-                wait_set.add_service(self.service.handle)
-                wait_set.add_guard_condition(self._wake.handle)
-                wait_set.wait(-1)  # no timeout: the guard condition wakes it to stop
-                ready = wait_set.get_ready_entities('service')
-                return not self._stopping and self.service.handle.pointer in ready
-        except (InvalidHandle, _rclpy.RCLError):
-            if self._stopping or not context.ok():
-                return False
-            raise
-
-    def _serve(self) -> None:
+    def _take_and_answer(self) -> None:
+        """Take one request, run the callback, send its response (on the loop's thread)."""
         logger = self.owner.get_logger()
-        while not self._stopping:
-            try:
-                if not self._wait():
-                    continue
-                with self.service.handle:
-                    request, header = self.service.handle.service_take_request(
-                        self.srv_type.Request)
-            except InvalidHandle:  # destroyed under the wait
-                return
-            except Exception as error:  # noqa: BLE001 - a wait or take that failed
-                if self._stopping or not self.owner.context.ok():
-                    return
-                logger.error(f'{self.service_name}: no request taken: {error}')
-                time.sleep(0.1)  # no hot loop if the failure persists
-                continue
-            if request is None:  # the middleware had nothing after all
-                continue
-            self._answer(request, header, logger)
-
-    def _answer(self, request: Any, header: Any, logger: Any) -> None:
-        """Run the callback and send its response (or the error, if it raised)."""
+        try:
+            with self.service.handle:
+                request, header = self.service.handle.service_take_request(
+                    self.srv_type.Request)
+        except InvalidHandle:  # destroyed under the wait
+            return
+        except Exception as error:  # noqa: BLE001 - e.g. a request that does not convert
+            logger.error(f'{self.service_name}: no request taken: {error}')
+            return
+        if request is None:  # the middleware had nothing after all
+            return
         response = self.srv_type.Response()
         try:
             response = self.callback(request, response)
@@ -147,9 +232,6 @@ class ServiceThread:
             logger.error(f'{self.service_name}: response not sent: {error}')
 
     def destroy(self, timeout_s: float = 5.0) -> None:
-        """Stop the thread (after a callback that is running) and destroy the service."""
-        self._stop()
-        if self._thread is not threading.current_thread():
-            self._thread.join(timeout_s)
+        """Leave the loop (the last one stops it, after a running callback) and destroy."""
+        self.loop.remove(self, timeout_s)
         self.node.destroy_node()
-        self._wake.destroy()

@@ -38,7 +38,7 @@ from suspension_tuning_interfaces.srv import EvaluateDesign
 
 from suspension_tuning import evaluation, simplified_inputs
 from suspension_tuning.nodes._service_calls import helper_node
-from suspension_tuning.nodes._service_thread import ServiceThread
+from suspension_tuning.nodes._service_thread import ServiceLoop, ServiceThread
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.vehicle.simplified import SimplifiedInputs
 
@@ -117,7 +117,9 @@ def quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, flo
 class FullVehicleSimNode(Node):
     """Service adapter over :func:`suspension_tuning.evaluation.evaluate`."""
 
-    def __init__(self, name: str = 'full_vehicle_sim', **kwargs) -> None:
+    def __init__(self, name: str = 'full_vehicle_sim', service_loop: ServiceLoop | None = None,
+                 **kwargs) -> None:
+        """``service_loop``: serve ``evaluate`` on this shared loop (default its own)."""
         super().__init__(name, **kwargs)
         self.declare_parameter('telemetry_decimation', 2)
         self.declare_parameter('valve_controller', 'ros')
@@ -131,7 +133,7 @@ class FullVehicleSimNode(Node):
                                            self._on_valve_state, RELIABLE)
         # Served on a thread of its own (no executor in the path of a request).
         self.evaluate_service = ServiceThread(self, EvaluateDesign, 'evaluate',
-                                              self._on_evaluate)
+                                              self._on_evaluate, loop=service_loop)
         self.pub = {name: self.create_publisher(kind, f'~/telemetry/{name}', TELEMETRY)
                     for name, kind in (('imu', Imu), ('struts', JointState),
                                        ('tyres', JointState), ('seats', JointState),

@@ -25,7 +25,7 @@ from suspension_tuning_interfaces.srv import Calibrate, EvaluateDesign, Evaluate
 from suspension_tuning import simplified_inputs
 from suspension_tuning.nodes import _logging
 from suspension_tuning.nodes._service_calls import ServiceCaller, ServiceCallError
-from suspension_tuning.nodes._service_thread import ServiceThread
+from suspension_tuning.nodes._service_thread import ServiceLoop, ServiceThread
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.scaling import Scaling, scaling_key
 from suspension_tuning.optim.simplified_gradient import (
@@ -41,7 +41,12 @@ SCENARIOS = ('ride', 'handling')
 class GradientEvaluatorNode(Node):
     """Service adapter over the eq. 25 calibration and the simplified gradient."""
 
-    def __init__(self, **kwargs) -> None:
+    def __init__(self, service_loop: ServiceLoop | None = None, **kwargs) -> None:
+        """``service_loop``: serve ``gradient`` on this shared loop (default its own).
+
+        ``calibrate`` always has a thread of its own: it waits for a simulation
+        worker, which may share that loop.
+        """
         super().__init__('gradient_evaluator', **kwargs)
         self.declare_parameter('sim_service', '/full_vehicle_sim/evaluate')
         self.declare_parameter('calibration_dir', '')
@@ -56,11 +61,12 @@ class GradientEvaluatorNode(Node):
         self.sim_client = self.caller.create_client(EvaluateDesign,
                                                     str(self.get_parameter('sim_service').value))
         self.simplified_runs = 0
-        # Each served on a thread of its own: a gradient is answered while a
+        # Served outside the node's executor: a gradient is answered while a
         # calibration runs, and no executor is in the path of a request.
-        self.service_threads = [ServiceThread(self, kind, name, callback) for name, kind, callback
-                         in (('gradient', EvaluateGradient, self._on_gradient),
-                             ('calibrate', Calibrate, self._on_calibrate))]
+        self.service_threads = [
+            ServiceThread(self, EvaluateGradient, 'gradient', self._on_gradient,
+                          loop=service_loop),
+            ServiceThread(self, Calibrate, 'calibrate', self._on_calibrate)]
 
     # ---------------------------------------------------------------- calibrate
     def _cache_path(self, key: dict) -> Path:
