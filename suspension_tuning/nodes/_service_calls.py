@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 import rclpy
+from rclpy.exceptions import InvalidHandle
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
@@ -57,6 +58,51 @@ def helper_node(owner: Node, name: str, **node_options: Any
     executor = SingleThreadedExecutor(context=owner.context)
     executor.add_node(node)
     return node, executor
+
+
+def wait_ready(context: Any, timeout_ns: int, clients: Sequence[Any] = (),
+               services: Sequence[Any] = (), guards: Sequence[Any] = ()
+               ) -> tuple[list[Any], list[Any]]:
+    """Block on one wait set of these entities; return the ready clients and services.
+
+    The loop of rclpy's own ``wait_for_message`` (``rclpy/wait_for_message.py``), for
+    the clients and services of nodes that no executor spins.  An entity destroyed
+    in the meantime is left out of the wait.
+
+    Parameters
+    ----------
+    context : rclpy.context.Context
+        Context of the entities.
+    timeout_ns : int
+        Longest wait, ns; -1 waits until something is ready.
+    clients, services, guards : sequences
+        rclpy clients, services and guard conditions to wait on.
+    """
+    with ExitStack() as handles:
+        live: dict[str, list[Any]] = {}
+        for kind, entities in (('client', clients), ('service', services),
+                               ('guard_condition', guards)):
+            live[kind] = []
+            for entity in entities:
+                try:
+                    handles.enter_context(entity.handle)
+                except InvalidHandle:  # destroyed since: not waited on
+                    continue
+                live[kind].append(entity)
+        handles.enter_context(context.handle)
+        wait_set = _rclpy.WaitSet(0, len(live['guard_condition']), 0, len(live['client']),
+                                  len(live['service']), 0, context.handle)
+        wait_set.clear_entities()
+        for client in live['client']:
+            wait_set.add_client(client.handle)
+        for service in live['service']:
+            wait_set.add_service(service.handle)
+        for guard in live['guard_condition']:
+            wait_set.add_guard_condition(guard.handle)
+        wait_set.wait(timeout_ns)
+        ready = {kind: wait_set.get_ready_entities(kind) for kind in ('client', 'service')}
+        return ([c for c in live['client'] if c.handle.pointer in ready['client']],
+                [s for s in live['service'] if s.handle.pointer in ready['service']])
 
 
 class ServiceCallError(RuntimeError):
@@ -184,25 +230,13 @@ class ServiceCaller:
         the executor's machinery; an executor's ``spin_once`` (a new wait set built in
         Python from every entity of its nodes, a timer for the timeout, a task per
         response and one more for the future's done callback) cost about 0.4 ms per
-        response.  This is the loop of rclpy's own ``wait_for_message``
-        (``rclpy/wait_for_message.py``) for clients: a wait set of the pending
-        clients, then ``take_response`` and the future of its sequence number, as the
-        executor's ``_take_client`` does.
+        response.  Here: a wait set of the pending clients (:func:`wait_ready`), then
+        ``take_response`` and the future of its sequence number, as the executor's
+        ``_take_client`` does.
         """
-        clients = list(dict.fromkeys(clients))
-        with ExitStack() as handles:
-            for client in clients:
-                handles.enter_context(client.handle)
-            handles.enter_context(self.node.context.handle)
-            wait_set = _rclpy.WaitSet(0, 0, 0, len(clients), 0, 0, self.node.context.handle)
-            wait_set.clear_entities()
-            for client in clients:
-                wait_set.add_client(client.handle)
-            wait_set.wait(timeout_sec_to_nsec(timeout_s))
-            ready = wait_set.get_ready_entities('client')
-        for client in clients:
-            if client.handle.pointer not in ready:
-                continue
+        ready, _ = wait_ready(self.node.context, timeout_sec_to_nsec(timeout_s),
+                              clients=list(dict.fromkeys(clients)))
+        for client in ready:
             with client.handle:
                 header, response = client.handle.take_response(client.srv_type.Response)
             if header is None:

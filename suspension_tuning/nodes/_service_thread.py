@@ -33,17 +33,15 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from contextlib import ExitStack
 from typing import Any
 
 from rclpy.exceptions import InvalidHandle
 from rclpy.guard_condition import GuardCondition
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import qos_profile_services_default
 from rclpy.service_introspection import ServiceIntrospectionState
 
-from suspension_tuning.nodes._service_calls import hidden_node
+from suspension_tuning.nodes._service_calls import hidden_node, wait_ready
 
 
 class ServiceLoop:
@@ -119,25 +117,9 @@ class ServiceLoop:
         """Block until requests are in (their entries) or something changed ([])."""
         with self._lock:
             entries = list(self._entries)
-        context = self.context
-        with ExitStack() as handles:
-            live = []
-            for entry in entries:
-                try:
-                    handles.enter_context(entry.service.handle)
-                    live.append(entry)
-                except InvalidHandle:  # destroyed since: not waited on
-                    pass
-            handles.enter_context(self._wake.handle)
-            handles.enter_context(context.handle)
-            wait_set = _rclpy.WaitSet(0, 1, 0, 0, len(live), 0, context.handle)
-            wait_set.clear_entities()
-            for entry in live:
-                wait_set.add_service(entry.service.handle)
-            wait_set.add_guard_condition(self._wake.handle)
-            wait_set.wait(-1)  # no timeout: the guard condition wakes it
-            ready = wait_set.get_ready_entities('service')
-            return [entry for entry in live if entry.service.handle.pointer in ready]
+        _, ready = wait_ready(self.context, -1, services=[e.service for e in entries],
+                              guards=[self._wake])  # no timeout: the guard wakes it
+        return [entry for entry in entries if entry.service in ready]
 
     def _serve(self) -> None:
         while not self._stopping:

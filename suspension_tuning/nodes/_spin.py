@@ -60,8 +60,9 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None,
         A MultiThreadedExecutor, for nodes with callbacks that run long (an
         optimisation, a batch of simulations) while goal, cancel or parameter
         requests must still be answered; otherwise a SingleThreadedExecutor, the
-        cheaper per callback.  (Service calls made from a callback spin a private
-        executor, ``_service_calls.ServiceCaller``, so they need neither.)
+        cheaper per callback.  (Service calls made from a callback take their own
+        responses, ``_service_calls.ServiceCaller``, and the hot services have
+        threads of their own, ``_service_thread.py``: neither needs this executor.)
     """
     rclpy.init(args=args)
     node = make_node()
