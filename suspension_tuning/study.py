@@ -49,13 +49,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import minimize
 
 from suspension_tuning.optim.dynamic_q import load_options
 from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
-from suspension_tuning.paths import config_dir
+from suspension_tuning.paths import config_dir, dump_yaml
 from suspension_tuning.tuning import (
     FullEvaluation,
     RunCounter,
@@ -589,7 +588,7 @@ def write_bag(path: Path, run: StudyRun, recorder: _Recorder) -> Path:
     from suspension_tuning.bag.writer import BagWriter, qos_profile_dict
     from suspension_tuning.nodes.coordinator import configuration_yaml
 
-    text = yaml.safe_dump(run_config(run), sort_keys=False) + configuration_yaml()
+    text = dump_yaml(run_config(run)) + configuration_yaml()
     latched = qos_profile_dict(durability='transient_local', depth=1)
     reliable = qos_profile_dict(depth=100)
     physical = physical_settings(run.x)

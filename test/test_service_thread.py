@@ -1,5 +1,6 @@
 """A service on a thread of its own (suspension_tuning.nodes._service_thread)."""
 
+import contextlib
 import threading
 
 import pytest
@@ -23,38 +24,37 @@ def _request(*designs: float) -> EvaluateDesign.Request:
     return EvaluateDesign.Request(scenario='ride', n_vars=2, designs=list(designs))
 
 
-def test_the_service_is_answered_under_the_owners_name_with_no_executor(ros_context):
-    owner = rclpy.create_node('owner', namespace='/ns', context=ros_context)
-    service = ServiceThread(owner, EvaluateDesign, 'evaluate', _echo)
+@contextlib.contextmanager
+def _served(context, callback, namespace: str = '/'):
+    """(service, caller, client): ``evaluate`` of a node ``owner``, and a caller of it."""
+    owner = rclpy.create_node('owner', namespace=namespace, context=context)
+    service = ServiceThread(owner, EvaluateDesign, 'evaluate', callback)
     caller = ServiceCaller(owner)
     try:
-        assert service.service_name == '/ns/owner/evaluate'
-        client = caller.create_client(EvaluateDesign, '/ns/owner/evaluate')
-        # 6 values of 2 variables: 3 designs.
-        response = caller.call(client, _request(0.1, 0.2, 0.3, 0.4, 0.5, 0.6), 10.0, 10.0)
-        assert response.success and response.n_designs == 3
-        assert service.calls == 1
+        yield service, caller, caller.create_client(EvaluateDesign, service.service_name)
     finally:
         caller.destroy()
         service.destroy()
         owner.destroy_node()
 
 
+def test_the_service_is_answered_under_the_owners_name_with_no_executor(ros_context):
+    with _served(ros_context, _echo, namespace='/ns') as (service, caller, client):
+        assert service.service_name == '/ns/owner/evaluate'
+        assert client.srv_name == '/ns/owner/evaluate'
+        # 6 values of 2 variables: 3 designs.
+        response = caller.call(client, _request(0.1, 0.2, 0.3, 0.4, 0.5, 0.6), 10.0, 10.0)
+        assert response.success and response.n_designs == 3
+        assert service.calls == 1
+
+
 def test_a_callback_that_raises_is_answered_with_the_error_and_serving_goes_on(ros_context):
-    owner = rclpy.create_node('owner', context=ros_context)
-    service = ServiceThread(owner, EvaluateDesign, 'evaluate', _echo)
-    caller = ServiceCaller(owner)
-    try:
-        client = caller.create_client(EvaluateDesign, '/owner/evaluate')
+    with _served(ros_context, _echo) as (service, caller, client):
         failed = caller.call(client, _request(float('nan'), 0.5), 10.0, 10.0)
         assert not failed.success
         assert failed.error == 'ZeroDivisionError: a NaN design'
         assert caller.call(client, _request(0.5, 0.5), 10.0).n_designs == 1
         assert service.calls == 2
-    finally:
-        caller.destroy()
-        service.destroy()
-        owner.destroy_node()
 
 
 def test_the_thread_stops_on_destroy_and_on_context_shutdown(ros_context):
@@ -72,24 +72,16 @@ def test_the_thread_stops_on_destroy_and_on_context_shutdown(ros_context):
 
 def test_a_callback_returning_no_response_leaves_the_call_unanswered_not_the_thread_dead(
         ros_context):
-    owner = rclpy.create_node('owner', context=ros_context)
     answers = iter([None])  # first call: no response object; afterwards: _echo
 
     def callback(request, response):
         return next(answers, _echo(request, response))
 
-    service = ServiceThread(owner, EvaluateDesign, 'evaluate', callback)
-    caller = ServiceCaller(owner)
-    try:
-        client = caller.create_client(EvaluateDesign, '/owner/evaluate')
+    with _served(ros_context, callback) as (service, caller, client):
         with pytest.raises(ServiceCallError, match='no response within 1.0 s'):
             caller.call(client, _request(0.5, 0.5), 1.0, 10.0)
         assert caller.call(client, _request(0.5, 0.5), 10.0).n_designs == 1
         assert service.calls == 1  # the response that could be sent
-    finally:
-        caller.destroy()
-        service.destroy()
-        owner.destroy_node()
 
 
 def test_services_sharing_a_loop_run_on_one_thread_until_the_last_leaves(ros_context):
