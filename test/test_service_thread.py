@@ -112,3 +112,49 @@ def test_services_sharing_a_loop_run_on_one_thread_until_the_last_leaves(ros_con
     finally:
         caller.destroy()
         owner.destroy_node()
+
+
+def test_a_job_on_the_loop_runs_on_its_thread_and_its_calls_to_the_loop_are_answered_there(
+        ros_context):
+    """A job waiting for a service of its own loop answers the request itself.
+
+    Without that, the loop's only thread would wait for itself (a deadlock); a nested
+    call (a callback that calls another service of the loop) is answered the same way.
+    """
+    owner = rclpy.create_node('owner', context=ros_context)
+    loop = ServiceLoop(ros_context, 'jobs')
+    threads: list[int] = []
+    caller = ServiceCaller(owner, serve_loop=loop)
+    inner_client = caller.create_client(EvaluateDesign, '/owner/inner')
+
+    def inner(request, response):
+        threads.append(threading.get_ident())
+        return _echo(request, response)
+
+    def outer(request, response):
+        threads.append(threading.get_ident())
+        # Nested: answered inside this callback's wait; 'outer' itself is not re-entered.
+        return caller.call(inner_client, request, 10.0, 10.0)
+
+    services = [ServiceThread(owner, EvaluateDesign, 'inner', inner, loop=loop),
+                ServiceThread(owner, EvaluateDesign, 'outer', outer, loop=loop)]
+    outer_client = caller.create_client(EvaluateDesign, '/owner/outer')
+    try:
+        def job(designs):
+            threads.append(threading.get_ident())
+            return caller.call(outer_client, _request(*designs), 10.0, 10.0).n_designs
+
+        first = loop.submit(job, [0.1, 0.2])
+        second = loop.submit(job, [0.1, 0.2, 0.3, 0.4])
+        assert (first.result(20.0), second.result(20.0)) == (1, 2)  # in order
+        # job, outer, inner per job: all on the loop's thread, none on this one.
+        assert len(threads) == 6 and set(threads) == {loop._thread.ident}
+        assert [s.calls for s in services] == [2, 2]
+    finally:
+        for service in services:
+            service.destroy()
+        caller.destroy()
+        owner.destroy_node()
+    assert not loop.alive
+    with pytest.raises(RuntimeError, match='the loop has stopped'):
+        loop.submit(job, [0.5, 0.5])

@@ -13,7 +13,7 @@ import threading
 import time
 from collections.abc import Sequence
 from contextlib import ExitStack
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import rclpy
@@ -23,6 +23,9 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.utilities import timeout_sec_to_nsec
 from suspension_tuning_interfaces.srv import EvaluateDesign
+
+if TYPE_CHECKING:
+    from suspension_tuning.nodes._service_thread import ServiceLoop
 
 
 def hidden_node(owner: Node, name: str, **node_options: Any) -> Node:
@@ -136,17 +139,28 @@ class ServiceCaller:
     a wait set of its pending clients and takes the responses itself
     (:meth:`_take_responses`).  Callers on several threads take turns (a lock).
 
+    A caller that waits on the thread of ``serve_loop`` (a callback or a job of that
+    :class:`~suspension_tuning.nodes._service_thread.ServiceLoop`) answers the
+    loop's requests while it waits: the loop cannot take them while its thread
+    waits here, and a call to a service of the same loop is answered on this thread,
+    through the middleware as any other call but with no thread to wake
+    (``benchmarks/bench_graph_timeline.py``, ``call_overhead_ms``).
+
     Parameters
     ----------
     node : rclpy.node.Node
         The node on whose behalf the calls are made (name, namespace, context).
+    serve_loop : ServiceLoop, optional
+        The loop whose requests a wait on its thread answers.
     """
 
-    def __init__(self, node: Node) -> None:
+    def __init__(self, node: Node, serve_loop: ServiceLoop | None = None) -> None:
         self.owner = node
+        self.serve_loop = serve_loop
         self.node = hidden_node(node, f'_{node.get_name()}_calls',
                                 start_parameter_services=False, enable_rosout=False)
-        self._lock = threading.Lock()
+        # Re-entrant: a request answered inside a wait may call through this caller.
+        self._lock = threading.RLock()
 
     def create_client(self, srv_type: Any, name: str) -> Any:
         """A client of service ``name`` (relative names resolve in the owner's namespace)."""
@@ -223,8 +237,10 @@ class ServiceCaller:
                     del pending[i]
         return outcomes
 
-    def _take_responses(self, clients: Sequence[Any], timeout_s: float) -> None:
+    def _take_responses(self, clients: Sequence[Any], timeout_s: float) -> bool:
         """Wait until a response is in for one of ``clients`` (or the timeout), take it.
+
+        Returns whether anything came in (a response, or a request answered).
 
         The private node holds nothing but these clients, so its wait needs none of
         the executor's machinery; an executor's ``spin_once`` (a new wait set built in
@@ -232,10 +248,17 @@ class ServiceCaller:
         response and one more for the future's done callback) cost about 0.4 ms per
         response.  Here: a wait set of the pending clients (:func:`wait_ready`), then
         ``take_response`` and the future of its sequence number, as the executor's
-        ``_take_client`` does.
+        ``_take_client`` does.  On the thread of :attr:`serve_loop`, the loop's
+        requests that come in meanwhile are answered here too.
         """
-        ready, _ = wait_ready(self.node.context, timeout_sec_to_nsec(timeout_s),
-                              clients=list(dict.fromkeys(clients)))
+        loop = self.serve_loop
+        entries = loop.idle() if loop is not None and loop.on_thread() else []
+        ready, requests = wait_ready(self.node.context, timeout_sec_to_nsec(timeout_s),
+                                     clients=list(dict.fromkeys(clients)),
+                                     services=[entry.service for entry in entries])
+        served = [entry for entry in entries if entry.service in requests]
+        for entry in served:
+            loop.serve(entry)
         for client in ready:
             with client.handle:
                 header, response = client.handle.take_response(client.srv_type.Response)
@@ -246,6 +269,7 @@ class ServiceCaller:
             except KeyError:  # given up on (timed out) before the answer came
                 continue
             future.set_result(response)
+        return bool(ready or served)
 
     def destroy(self) -> None:
         """Destroy the private node."""

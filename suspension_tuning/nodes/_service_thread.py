@@ -30,9 +30,11 @@ team has slept since the previous iteration, and each 4-design simplified batch 
 
 from __future__ import annotations
 
+import collections
 import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import Future
 from typing import Any
 
 from rclpy.exceptions import InvalidHandle
@@ -47,6 +49,13 @@ from suspension_tuning.nodes._service_calls import hidden_node, wait_ready
 class ServiceLoop:
     """A thread serving services one request at a time (see the module docstring).
 
+    It also runs jobs handed to it (:meth:`submit`), between requests: the graph in
+    one process runs the coordinator's goals here.  A job's service calls made
+    through a :class:`~suspension_tuning.nodes._service_calls.ServiceCaller` that
+    serves this loop answer the loop's requests while they wait (:meth:`serve`), so
+    a call to a service of the same loop is answered on the calling thread, with no
+    hand-over between threads (the model loop of ``graph.build_nodes``).
+
     It stops when its last service is removed or when the context shuts down.
 
     Parameters
@@ -60,6 +69,9 @@ class ServiceLoop:
     def __init__(self, context: Any, name: str) -> None:
         self.context = context
         self._entries: list[ServiceThread] = []
+        self._active: list[ServiceThread] = []  # callbacks running on this thread
+        self._jobs: collections.deque[tuple[Future, Callable[..., Any], tuple]] = (
+            collections.deque())
         self._lock = threading.Lock()
         self._stopping = False
         self._wake = GuardCondition(None, None, context=context)
@@ -72,6 +84,46 @@ class ServiceLoop:
     def alive(self) -> bool:
         """Whether the thread still runs."""
         return self._thread.is_alive()
+
+    def on_thread(self) -> bool:
+        """Whether the caller runs on the loop's thread (in a callback or a job)."""
+        return threading.current_thread() is self._thread
+
+    def submit(self, function: Callable[..., Any], *args: Any) -> Future:
+        """Run ``function(*args)`` on the loop's thread, after the request in hand.
+
+        Jobs run one at a time, in order; a job is not started inside another job's
+        wait.  Returns a ``concurrent.futures.Future`` of its result.
+
+        Raises
+        ------
+        RuntimeError
+            The loop has stopped.
+        """
+        future: Future = Future()
+        with self._lock:
+            if self._stopping or not self._thread.is_alive():
+                raise RuntimeError(f'{self._thread.name}: the loop has stopped')
+            self._jobs.append((future, function, args))
+        self._kick()
+        return future
+
+    def idle(self) -> list[ServiceThread]:
+        """The services a wait on the loop's thread may serve: those not in a callback.
+
+        A callback waiting for a response (``calibrate`` for the simulation's
+        samples) is not entered again from its own wait.
+        """
+        with self._lock:
+            return [entry for entry in self._entries if entry not in self._active]
+
+    def serve(self, entry: ServiceThread) -> None:
+        """Take and answer one request of ``entry`` (on the loop's thread)."""
+        self._active.append(entry)
+        try:
+            entry._take_and_answer()
+        finally:
+            self._active.remove(entry)
 
     def add(self, entry: ServiceThread) -> None:
         """Serve ``entry`` too (from the next wait on)."""
@@ -115,13 +167,36 @@ class ServiceLoop:
 
     def _wait(self) -> list[ServiceThread]:
         """Block until requests are in (their entries) or something changed ([])."""
-        with self._lock:
-            entries = list(self._entries)
+        entries = self.idle()
         _, ready = wait_ready(self.context, -1, services=[e.service for e in entries],
                               guards=[self._wake])  # no timeout: the guard wakes it
         return [entry for entry in entries if entry.service in ready]
 
+    def _run_job(self) -> None:
+        """Run the oldest job, if any (requests in meanwhile go first, then the next)."""
+        with self._lock:
+            if not self._jobs:
+                return
+            future, function, args = self._jobs.popleft()
+            if self._jobs:
+                self._kick()
+        if not future.set_running_or_notify_cancel():
+            return
+        try:
+            future.set_result(function(*args))
+        except BaseException as error:  # noqa: BLE001 - handed to whoever waits
+            future.set_exception(error)
+
     def _serve(self) -> None:
+        try:
+            self._serve_until_stopped()
+        finally:
+            with self._lock:
+                jobs, self._jobs = list(self._jobs), collections.deque()
+            for future, _, _ in jobs:
+                future.cancel()
+
+    def _serve_until_stopped(self) -> None:
         while not self._stopping:
             try:
                 ready = self._wait()
@@ -137,7 +212,8 @@ class ServiceLoop:
             for entry in ready:
                 if self._stopping:
                     return
-                entry._take_and_answer()
+                self.serve(entry)
+            self._run_job()
 
 
 class ServiceThread:
