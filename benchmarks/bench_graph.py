@@ -111,12 +111,12 @@ class Graph:
 
         rclpy.init()
         self.cache = tempfile.mkdtemp(prefix='bench_graph_calibration_')
-        # As graph.build_nodes: evaluate and gradient served on one thread.
+        # As graph.build_nodes: evaluate, gradient, calibrate and goals on one thread.
         loop = model_service_loop()
         self.nodes = [FullVehicleSimNode(service_loop=loop),
                       GradientEvaluatorNode(service_loop=loop, parameter_overrides=[
                           Parameter('calibration_dir', value=self.cache)]),
-                      CoordinatorNode(parameter_overrides=[
+                      CoordinatorNode(goal_loop=loop, parameter_overrides=[
                           Parameter('calibration_samples', value=SAMPLES),
                           Parameter('final_telemetry', value=False)])]
         self.client_node = Node('bench_graph_client')

@@ -8,8 +8,10 @@ consecutive timestamps is one segment of it, named by its two ends.
 
 Prints ``name: value`` lines: the median over the runs and the calls of each segment
 that exists only in the graph (ms), how often it occurs per run, and their sum per
-run against the model time.  The figures quoted in the README's benchmark section
-come from here.  DDS stays on loopback with a domain of its own (``bench_graph``).
+run against the model time; and ``call_overhead_ms``, the time the service calls
+take beyond their callbacks (all calls of a run, the calls nested in a callback
+included).  The figures quoted in the README's benchmark section come from here.
+DDS stays on loopback with a domain of its own (``bench_graph``).
 """
 
 from __future__ import annotations
@@ -34,9 +36,8 @@ SEGMENTS = {
     ('execute>', 'runconfig>'): 'execute_start_ms',
     ('runconfig>', '<runconfig'): 'run_config_ms',
     ('call>', 'take>'): 'request_send_ms',
-    ('take>', '*_cb>'): 'request_delivery_ms',
+    ('take>', '*_cb>'): 'request_take_ms',
     ('send>', '<send'): 'response_send_ms',
-    ('<send', '<take'): 'response_delivery_ms',
     ('fb>', '<fb'): 'feedback_ms',
     ('<execute', 'done'): 'result_to_client_ms',
 }
@@ -94,11 +95,44 @@ def segments(run: list[tuple[float, str]]) -> dict[str, list[float]]:
     return found
 
 
+def inside_ms(run: list[tuple[float, str]], label: str) -> float:
+    """Time inside the wrapped calls named ``label`` in one run (ms), nested ones once."""
+    total, depth, start = 0.0, 0, 0.0
+    for t, event in run:
+        if event == label + '>':
+            depth += 1
+            if depth == 1:
+                start = t
+        elif event == '<' + label:
+            depth -= 1
+            if depth == 0:
+                total += t - start
+    return total * 1e3
+
+
 def model_ms(run: list[tuple[float, str]]) -> float:
     """Time inside the models in one run (ms)."""
-    starts = [t for t, label in run if label == 'model>']
-    ends = [t for t, label in run if label == '<model']
-    return sum(e - s for s, e in zip(starts, ends)) * 1e3
+    return inside_ms(run, 'model')
+
+
+def call_overhead_ms(run: list[tuple[float, str]]) -> float:
+    """Time of the service calls beyond their callbacks in one run (ms).
+
+    Every call and every callback counted on its own: a call nested in a callback
+    (the calibration's samples) adds its own overhead and leaves its callback's.
+    """
+    open_at: dict[str, list[float]] = collections.defaultdict(list)
+    spans = {'call': 0.0, 'cb': 0.0}
+    for t, event in run:
+        name = event.strip('<>')
+        kind = 'call' if name == 'call' else 'cb' if name.endswith('_cb') else None
+        if kind is None:
+            continue
+        if event.endswith('>'):
+            open_at[name].append(t)
+        else:
+            spans[kind] += t - open_at[name].pop()
+    return (spans['call'] - spans['cb']) * 1e3
 
 
 def main() -> int:
@@ -125,6 +159,10 @@ def main() -> int:
         total += [sum(found.get(name, [])) for found in per_run]
         print(f'{name}: {np.median(values):.3f}  (x{int(np.median(counts))} per run)')
     print(f'named_segments_sum_ms: {np.median(total):.1f}')
+    calls = [sum(1 for _, event in r if event == 'call>') for r in runs]
+    overhead = [call_overhead_ms(r) for r in runs]
+    print(f'call_overhead_ms: {np.median(overhead):.1f}  (x{int(np.median(calls))} calls per '
+          f'run, {np.median(np.array(overhead) / calls):.3f} per call)')
     print(f'run_wall_ms: {np.median([(r[-1][0] - r[0][0]) * 1e3 for r in runs]):.1f}')
     print(f'model_ms: {np.median([model_ms(r) for r in runs]):.1f}')
     return 0

@@ -79,8 +79,8 @@ def main(argv: list[str] | None = None) -> int:
 
     rclpy.init()
     bags = Path(args.bags).resolve()
-    nodes = build_nodes(workers=1, record=True, recorder_overrides=[
-        Parameter('output_dir', value=str(bags))])
+    nodes = build_nodes(workers=1, record=True, overrides={
+        'recorder': [Parameter('output_dir', value=str(bags))]})
     recorder = nodes[-1]
     client_node = Node('demo')
     graph = SpinningGraph(nodes, [client_node])

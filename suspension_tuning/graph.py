@@ -13,11 +13,11 @@ from __future__ import annotations
 import argparse
 import sys
 import threading
+from collections.abc import Mapping
 
 import rclpy
 from rclpy.executors import (
     Executor,
-    MultiThreadedExecutor,
     SingleThreadedExecutor,
 )
 from rclpy.node import Node
@@ -28,7 +28,7 @@ from suspension_tuning.nodes._spin import spin_until_shutdown
 
 
 def build_nodes(workers: int = 1, record: bool = True, context=None,
-                recorder_overrides: list[Parameter] | None = None) -> list[Node]:
+                overrides: Mapping[str, list[Parameter]] | None = None) -> list[Node]:
     """Create the graph's nodes (not spinning).
 
     Parameters
@@ -39,8 +39,9 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
         Add the recorder node (one bag per optimisation run).
     context : rclpy.context.Context, optional
         Context of the nodes (tests use their own).
-    recorder_overrides : list of Parameter, optional
-        Parameters of the recorder (e.g. its output folder).
+    overrides : mapping of node name to list of Parameter, optional
+        Parameters set on a node (e.g. ``{'recorder': [Parameter('output_dir', ...)]}``),
+        over those the graph sets; ``--params-file`` applies below both.
     """
     from suspension_tuning.nodes.coordinator import CoordinatorNode
     from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
@@ -50,33 +51,46 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
     if workers < 1:
         raise ValueError(f'need at least one simulation worker, got {workers}')
     names = ['full_vehicle_sim'] if workers == 1 else [f'sim_{i}' for i in range(workers)]
-    # The first worker's evaluate and the gradient share one serving thread, so that
-    # the models run on one thread, as in-process (nodes/_service_thread.py).
+    # The first worker's evaluate, the gradient evaluator's services and the
+    # coordinator's goals share one thread, so that the models run on one thread, as
+    # in-process, and calls among them need no hand-over (model_service_loop).
     loop = model_service_loop(context)
+    overrides = overrides or {}
+
+    def params(name: str, *graph_set: Parameter) -> list[Parameter]:
+        return [*graph_set, *overrides.get(name, [])]
+
     nodes: list[Node] = [FullVehicleSimNode(name, context=context,
-                                            service_loop=loop if i == 0 else None)
+                                            service_loop=loop if i == 0 else None,
+                                            parameter_overrides=params(name))
                          for i, name in enumerate(names)]
-    worker_param = Parameter('sim_workers', value=[f'/{name}' for name in names])
-    nodes.append(GradientEvaluatorNode(
-        context=context, service_loop=loop,
-        parameter_overrides=[Parameter('sim_service', value=f'/{names[0]}/evaluate')]))
-    nodes.append(ValveControllerNode(context=context))
-    nodes.append(CoordinatorNode(context=context, parameter_overrides=[worker_param]))
+    nodes.append(GradientEvaluatorNode(context=context, service_loop=loop,
+                                       parameter_overrides=params(
+                                           'gradient_evaluator',
+                                           Parameter('sim_service',
+                                                     value=f'/{names[0]}/evaluate'))))
+    nodes.append(ValveControllerNode(context=context,
+                                     parameter_overrides=params('valve_controller')))
+    nodes.append(CoordinatorNode(context=context, goal_loop=loop, parameter_overrides=params(
+        'coordinator', Parameter('sim_workers', value=[f'/{name}' for name in names]))))
     if record:
         from suspension_tuning.nodes.recorder import RecorderNode
-        nodes.append(RecorderNode(context=context,
-                                  parameter_overrides=recorder_overrides or []))
+        nodes.append(RecorderNode(context=context, parameter_overrides=params('recorder')))
     return nodes
 
 
 def model_service_loop(context=None) -> ServiceLoop:
-    """The loop serving the first simulation worker's ``evaluate`` and the gradient.
+    """The one thread of the models' services and the coordinator's goals.
 
+    It serves the first simulation worker's ``evaluate`` and the gradient
+    evaluator's ``gradient`` and ``calibrate``, and runs the coordinator's goals.
     Both models then run on one thread and share numba's OpenMP team, which stays
     awake between them as in an in-process run; on two threads the gradient's team
     sleeps through each full-model run, and each 4-design simplified batch took
     1.5 ms longer (4.2 against 2.6-2.7 ms, ``benchmarks/bench_model_threads.py``).
-    The loop stops when both services are gone.
+    A goal (or a calibration) waiting for one of the loop's services answers the
+    request itself (``_service_calls.ServiceCaller``), through the middleware as
+    before, with no thread to wake.  The loop stops when its services are gone.
     """
     return ServiceLoop(context or rclpy.utilities.get_default_context(), 'models')
 
@@ -84,31 +98,26 @@ def model_service_loop(context=None) -> ServiceLoop:
 class SpinningGraph:
     """The graph's nodes spinning in background threads, one executor per node.
 
-    Every node but the coordinator gets a SingleThreadedExecutor: none of their
-    callbacks waits on another callback of the same executor (the hot services are
-    served outside the executors, ``nodes/_service_thread.py``, and service calls
-    take their own responses, ``_service_calls.ServiceCaller``), and a callback then
-    runs in the thread that took its request, with no hand-over to a thread pool.
-    Measured on the 2-variable ride optimisation (``benchmarks/bench_graph.py``):
-    one shared MultiThreadedExecutor added 56 ms to
-    a 0.95 s run, one executor per node 38 ms.  The coordinator keeps a
-    MultiThreadedExecutor: its action's execute callback runs for a whole
-    optimisation while goal, cancel and parameter requests must still be served.
-    Separate executors also keep a telemetry burst for the recorder and the
-    step-locked valve controller from waiting behind other nodes' callbacks.
-    :meth:`shutdown` stops the executors, joins the threads and destroys the nodes
-    (the recorder finalises its bag).
+    Every node gets a SingleThreadedExecutor: none of their callbacks waits on
+    another callback of the same executor (the hot services are served outside the
+    executors, ``nodes/_service_thread.py``; service calls take their own responses,
+    ``_service_calls.ServiceCaller``; the coordinator's goals run on goal threads of
+    their own), and a callback then runs in the thread that took its request, with
+    no hand-over to a thread pool.  Measured on the 2-variable ride optimisation
+    (``benchmarks/bench_graph.py``): one shared MultiThreadedExecutor added 56 ms to
+    a 0.95 s run, one executor per node 38 ms; the coordinator's goal starts 1.3 ms
+    sooner on a SingleThreadedExecutor than on a MultiThreadedExecutor.  Separate
+    executors also keep a telemetry burst for the recorder and the step-locked valve
+    controller from waiting behind other nodes' callbacks.  :meth:`shutdown` stops
+    the executors, joins the threads and destroys the nodes (the recorder finalises
+    its bag).
     """
 
     def __init__(self, nodes: list[Node], extra: list[Node] = ()) -> None:
-        from suspension_tuning.nodes.coordinator import CoordinatorNode
-
         self.nodes = [*nodes, *extra]
         self.executors: list[Executor] = []
         for node in self.nodes:
-            executor = (MultiThreadedExecutor(num_threads=4, context=node.context)
-                        if isinstance(node, CoordinatorNode)
-                        else SingleThreadedExecutor(context=node.context))
+            executor = SingleThreadedExecutor(context=node.context)
             executor.add_node(node)
             self.executors.append(executor)
         self.threads = [threading.Thread(target=self._spin, args=(e,), daemon=True)

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import subprocess
 import time
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -26,6 +28,7 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Task
 from std_msgs.msg import String
 from suspension_tuning_interfaces.action import Optimise
 from suspension_tuning_interfaces.msg import IterationRecord
@@ -37,6 +40,7 @@ from suspension_tuning.nodes._service_calls import (
     ServiceCallError,
     SimulationPool,
 )
+from suspension_tuning.nodes._service_thread import ServiceLoop
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.dynamic_q import load_options
 from suspension_tuning.paths import config_dir, dump_yaml, read_yaml
@@ -88,10 +92,54 @@ def record_to_msg(record: dict[str, Any], counter: RunCounter, t0: float) -> Ite
         wall_time_s=time.monotonic() - t0)
 
 
-class CoordinatorNode(Node):
-    """Action server ``optimise`` over the simulation workers and gradient evaluator."""
+class GoalThreadActionServer(ActionServer):
+    """rclpy's ActionServer, with each goal executed on a thread chosen by the node.
 
-    def __init__(self, **kwargs) -> None:
+    rclpy (Jazzy) runs a goal's execute callback as a task of the node's executor, so
+    an optimisation that runs for minutes needs a MultiThreadedExecutor to keep
+    cancel, goal and parameter requests answered, and every callback of the node
+    then pays a hand-over to a thread of its pool.  Here the executor (single
+    threaded) takes the goal, and rclpy's own execution coroutine (which runs the
+    callback, sets the goal's result and answers the result requests) runs in
+    ``run_goal``; the execute callback is synchronous, so the coroutine ends in one
+    step.  With the goal on the model loop (``graph.build_nodes``), the goal started
+    1.8 ms after it was sent, against 2.4 ms through a MultiThreadedExecutor
+    (``benchmarks/bench_graph_timeline.py``, ``goal_to_execute_ms``).
+
+    Parameters
+    ----------
+    *args, **kwargs
+        As for ``rclpy.action.ActionServer``.
+    run_goal : callable
+        ``run_goal(task)`` calls ``task()`` on the thread that is to run the goal.
+    """
+
+    def __init__(self, *args: Any, run_goal: Callable[[Task], Any], **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._run_goal = run_goal
+
+    def notify_execute(self, goal_handle: Any, execute_callback: Callable | None) -> None:
+        """Hand the goal's execution to ``run_goal`` (rclpy: an executor task)."""
+        callback = execute_callback or self._execute_callback
+        if callback is not None:
+            self._run_goal(Task(self._execute_goal, (callback, goal_handle)))
+
+
+class CoordinatorNode(Node):
+    """Action server ``optimise`` over the simulation workers and gradient evaluator.
+
+    Parameters
+    ----------
+    goal_loop : ServiceLoop, optional
+        Run goals on this loop's thread, and answer its requests while a goal waits
+        for a response (``graph.build_nodes``: the loop serving the models, so that
+        the coordinator's calls to them need no hand-over between threads).  By
+        default goals run on goal threads of the node's own (up to four at once).
+    **kwargs
+        As for ``rclpy.node.Node``.
+    """
+
+    def __init__(self, goal_loop: ServiceLoop | None = None, **kwargs) -> None:
         super().__init__('coordinator', **kwargs)
         self.declare_parameter('sim_workers', ['/full_vehicle_sim'])
         self.declare_parameter('gradient_node', '/gradient_evaluator')
@@ -105,7 +153,10 @@ class CoordinatorNode(Node):
         self.declare_parameter('final_telemetry', True)
         group = ReentrantCallbackGroup()
         self.timeout_s = float(self.get_parameter('call_timeout_s').value)
-        self.caller = ServiceCaller(self)
+        self.goal_loop = goal_loop
+        self.goal_threads = ThreadPoolExecutor(max_workers=4, thread_name_prefix='optimise')
+        self.goals: list[Future] = []
+        self.caller = ServiceCaller(self, serve_loop=goal_loop)
         self.pool = SimulationPool(self.caller, list(self.get_parameter('sim_workers').value),
                                    self.timeout_s)
         gradient_node = str(self.get_parameter('gradient_node').value).rstrip('/')
@@ -123,10 +174,23 @@ class CoordinatorNode(Node):
                                                 LATCHED)
         # Dumped once: the configuration a run records does not change while the node runs.
         self.static_config_yaml = configuration_yaml()
-        self.server = ActionServer(self, Optimise, '~/optimise', execute_callback=self._execute,
-                                   goal_callback=lambda _: GoalResponse.ACCEPT,
-                                   cancel_callback=lambda _: CancelResponse.ACCEPT,
-                                   callback_group=group)
+        self.server = GoalThreadActionServer(
+            self, Optimise, '~/optimise', execute_callback=self._execute,
+            goal_callback=lambda _: GoalResponse.ACCEPT,
+            cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=group,
+            run_goal=self._run_goal)
+
+    def _run_goal(self, task: Task) -> None:
+        """Start a goal on the goal loop, or on a goal thread (loop stopped or none)."""
+        future = None
+        if self.goal_loop is not None:
+            try:
+                future = self.goal_loop.submit(self._execute_task, task)
+            except RuntimeError:
+                future = None
+        if future is None:
+            future = self.goal_threads.submit(self._execute_task, task)
+        self.goals = [goal for goal in self.goals if not goal.done()] + [future]
 
     # ------------------------------------------------------------------ helpers
     def _request(self, goal: Optimise.Goal) -> TuningRequest:
@@ -184,6 +248,13 @@ class CoordinatorNode(Node):
         return response
 
     # ------------------------------------------------------------------ action
+    def _execute_task(self, task: Task) -> None:
+        """Run rclpy's execution coroutine of one goal (on the goal's thread)."""
+        task()
+        error = task.exception() if task.done() else RuntimeError('goal suspended')
+        if error is not None:
+            self.get_logger().error(f'goal execution failed: {type(error).__name__}: {error}')
+
     def _execute(self, goal_handle) -> Optimise.Result:
         t0 = time.monotonic()
         try:
@@ -240,14 +311,21 @@ class CoordinatorNode(Node):
 
 
     def destroy_node(self) -> None:
-        """Destroy the private client node too."""
+        """Destroy the private client node too, after running goals end (10 s at most)."""
+        for goal in self.goals:
+            if not goal.done():
+                try:
+                    goal.result(timeout=10.0)
+                except Exception:  # noqa: BLE001 - ended or stuck: destroyed all the same
+                    pass
+        self.goal_threads.shutdown(wait=False, cancel_futures=True)
         self.caller.destroy()
         super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning coordinator``."""
-    run_node(CoordinatorNode, args, multithreaded=True)
+    run_node(CoordinatorNode, args, multithreaded=False)
 
 
 if __name__ == '__main__':

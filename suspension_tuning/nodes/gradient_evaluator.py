@@ -42,10 +42,12 @@ class GradientEvaluatorNode(Node):
     """Service adapter over the eq. 25 calibration and the simplified gradient."""
 
     def __init__(self, service_loop: ServiceLoop | None = None, **kwargs) -> None:
-        """``service_loop``: serve ``gradient`` on this shared loop (default its own).
+        """``service_loop``: serve ``gradient`` and ``calibrate`` on this shared loop.
 
-        ``calibrate`` always has a thread of its own: it waits for a simulation
-        worker, which may share that loop.
+        By default ``gradient`` and ``calibrate`` have a loop (thread) each, and a
+        gradient is answered while a calibration runs.  On a shared loop, the
+        calibration's wait for the simulation worker answers the loop's requests
+        (the worker's ``evaluate`` among them, ``_service_calls.ServiceCaller``).
         """
         super().__init__('gradient_evaluator', **kwargs)
         self.declare_parameter('sim_service', '/full_vehicle_sim/evaluate')
@@ -57,16 +59,16 @@ class GradientEvaluatorNode(Node):
         self.calibration_dir = Path(directory or Path.home() / '.cache' / 'suspension_tuning'
                                     / 'calibration')
         self.scalings: dict[tuple[str, int], Scaling] = {}
-        self.caller = ServiceCaller(self)
+        self.caller = ServiceCaller(self, serve_loop=service_loop)
         self.sim_client = self.caller.create_client(EvaluateDesign,
                                                     str(self.get_parameter('sim_service').value))
         self.simplified_runs = 0
-        # Served outside the node's executor: a gradient is answered while a
-        # calibration runs, and no executor is in the path of a request.
+        # Served outside the node's executor: no executor is in the path of a request.
         self.service_threads = [
             ServiceThread(self, EvaluateGradient, 'gradient', self._on_gradient,
                           loop=service_loop),
-            ServiceThread(self, Calibrate, 'calibrate', self._on_calibrate)]
+            ServiceThread(self, Calibrate, 'calibrate', self._on_calibrate,
+                          loop=service_loop)]
 
     # ---------------------------------------------------------------- calibrate
     def _cache_path(self, key: dict) -> Path:

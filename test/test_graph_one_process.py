@@ -1,0 +1,118 @@
+"""The whole graph in one process (``ros2 run suspension_tuning graph``, ``make demo``).
+
+``graph.build_nodes`` puts the first simulation worker's ``evaluate``, the gradient
+evaluator's services and the coordinator's goals on one thread (the model loop): a
+goal's calls to those services are answered on the goal's own thread, while the
+coordinator's single-threaded executor stays free for cancel requests.  A 2-variable
+ride optimisation through it must reach the in-process bits, with every call made
+over the middleware as before (the services count their calls), and a cancel must
+stop it.
+"""
+
+import threading
+
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+
+pytestmark = pytest.mark.ros
+
+SAMPLES = 12  # fewer than the paper's 30 to keep the test short; same code path
+
+
+@pytest.fixture
+def one_process_graph(ros_context, tmp_path):
+    """(nodes, coordinator, client node, goal threads): the graph spinning, no recorder."""
+    from rclpy.node import Node
+
+    from suspension_tuning.graph import SpinningGraph, build_nodes
+    from suspension_tuning.nodes.coordinator import CoordinatorNode
+
+    nodes = build_nodes(workers=1, record=False, context=ros_context, overrides={
+        'gradient_evaluator': [Parameter('calibration_dir', value=str(tmp_path))],
+        'coordinator': [Parameter('calibration_samples', value=SAMPLES)]})
+    coordinator = next(n for n in nodes if isinstance(n, CoordinatorNode))
+    goal_threads: list[int] = []
+    execute = coordinator._execute
+
+    def recording_execute(goal_handle):
+        goal_threads.append(threading.get_ident())
+        return execute(goal_handle)
+
+    coordinator.server.register_execute_callback(recording_execute)
+    client_node = Node('one_process_client', context=ros_context)
+    graph = SpinningGraph(nodes, [client_node])
+    try:
+        yield nodes, coordinator, client_node, goal_threads
+    finally:
+        graph.shutdown()
+
+
+def _send(client_node, goal, feedback_callback=None):
+    from rclpy.action import ActionClient
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning.nodes._service_calls import wait_future
+
+    client = ActionClient(client_node, Optimise, '/coordinator/optimise')
+    assert client.wait_for_server(timeout_sec=10.0)
+    return wait_future(client.send_goal_async(goal, feedback_callback=feedback_callback),
+                       30.0)
+
+
+def test_ride_optimisation_through_the_one_process_graph_gives_the_in_process_bits(
+        one_process_graph):
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning import evaluation
+    from suspension_tuning.nodes._service_calls import wait_future
+    from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
+    from suspension_tuning.tuning import FullEvaluation, TuningRequest, optimise
+
+    nodes, coordinator, client_node, goal_threads = one_process_graph
+    feedback = []
+    handle = _send(client_node, Optimise.Goal(scenario='ride', n_vars=2,
+                                              gradient_source='simplified'),
+                   feedback.append)
+    result = wait_future(handle.get_result_async(), 300.0).result
+    assert result.success, result.message
+    assert goal_threads == [coordinator.goal_loop._thread.ident]  # on the model loop
+    # Every full run went over the middleware: the calibration batch, one per
+    # iteration evaluated, and the telemetry run of the optimum (final_telemetry).
+    assert nodes[0].evaluate_service.calls == 1 + len(result.history) + 1
+    assert len(feedback) == len(result.history)
+    assert result.n_calibration_runs == SAMPLES
+    options = coordinator.options.as_dict()
+    scaling = calibrate('ride', 2, n_samples=SAMPLES)
+
+    def full_model(points):
+        run = evaluation.evaluate('ride', points)
+        return FullEvaluation(run.f, run.g, run.result)
+
+    local = optimise(TuningRequest('ride', 2, None, 'simplified', options), full_model,
+                     SimplifiedGradient('ride', 2, scaling))
+    np.testing.assert_array_equal(result.x, local.x)
+    assert result.f == local.f
+
+
+def test_a_goal_on_the_model_loop_is_cancelled_between_iterations(one_process_graph):
+    from action_msgs.msg import GoalStatus
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning.nodes._service_calls import wait_future
+
+    _, _, client_node, _ = one_process_graph
+    first = threading.Event()
+    # Full-model gradients: 2n + 1 = 5 full runs per iteration, so that the cancel
+    # (sent at the first feedback) lands while the optimisation still runs.
+    handle = _send(client_node, Optimise.Goal(scenario='ride', n_vars=2,
+                                              gradient_source='full', max_iterations=20),
+                   lambda _: first.set())
+    assert first.wait(120.0), 'no feedback'
+    cancel = wait_future(handle.cancel_goal_async(), 30.0)
+    assert len(cancel.goals_canceling) == 1  # accepted by the coordinator's executor
+    answer = wait_future(handle.get_result_async(), 300.0)
+    assert answer.status == GoalStatus.STATUS_CANCELED
+    assert answer.result.message == 'cancelled'
+    # Stopped at the iteration after the cancel, not after 20.
+    assert 1 <= len(answer.result.history) <= 3
