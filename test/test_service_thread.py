@@ -2,6 +2,7 @@
 
 import contextlib
 import threading
+import time
 
 import pytest
 import rclpy
@@ -158,3 +159,28 @@ def test_a_job_on_the_loop_runs_on_its_thread_and_its_calls_to_the_loop_are_answ
     assert not loop.alive
     with pytest.raises(RuntimeError, match='the loop has stopped'):
         loop.submit(job, [0.5, 0.5])
+
+
+def test_a_server_gone_since_its_last_answer_is_reported_vanished_not_waited_for(ros_context):
+    """The caller skips the availability query for a server that answered last time.
+
+    A request to a server gone since then is noticed after one wait without news
+    (1 s), not after the call's timeout (10 s here).
+    """
+    owner = rclpy.create_node('owner', context=ros_context)
+    service = ServiceThread(owner, EvaluateDesign, 'evaluate', _echo)
+    caller = ServiceCaller(owner)
+    client = caller.create_client(EvaluateDesign, service.service_name)
+    try:
+        assert caller.call(client, _request(0.5, 0.5), 10.0, 10.0).success
+        service.destroy()
+        start = time.monotonic()
+        with pytest.raises(ServiceCallError, match='vanished while waiting'):
+            caller.call(client, _request(0.5, 0.5), 10.0, 10.0)
+        assert time.monotonic() - start < 5.0
+        # Not answered: the next call asks the graph first, and finds no server.
+        with pytest.raises(ServiceCallError, match='not available'):
+            caller.call(client, _request(0.5, 0.5), 10.0, 0.5)
+    finally:
+        caller.destroy()
+        owner.destroy_node()
