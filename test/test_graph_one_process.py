@@ -20,17 +20,37 @@ pytestmark = pytest.mark.ros
 SAMPLES = 12  # fewer than the paper's 30 to keep the test short; same code path
 
 
-@pytest.fixture
-def one_process_graph(ros_context, tmp_path):
-    """(nodes, coordinator, client node, goal threads): the graph spinning, no recorder."""
+def _nodes(context, calibration_dir, model_loop: bool):
+    """The graph's nodes as ``build_nodes`` makes them, or each with threads of its own."""
+    from suspension_tuning.graph import build_nodes
+    from suspension_tuning.nodes.coordinator import CoordinatorNode
+    from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
+    from suspension_tuning.nodes.gradient_evaluator import GradientEvaluatorNode
+
+    gradient_params = [Parameter('calibration_dir', value=str(calibration_dir))]
+    coordinator_params = [Parameter('calibration_samples', value=SAMPLES)]
+    if model_loop:
+        return build_nodes(workers=1, record=False, context=context, overrides={
+            'gradient_evaluator': gradient_params, 'coordinator': coordinator_params})
+    return [FullVehicleSimNode(context=context),
+            GradientEvaluatorNode(context=context, parameter_overrides=gradient_params),
+            CoordinatorNode(context=context, parameter_overrides=coordinator_params)]
+
+
+@pytest.fixture(params=['model_loop', 'goal_threads'])
+def one_process_graph(request, ros_context, tmp_path):
+    """(nodes, coordinator, client node, goal threads, graph): spinning, no recorder.
+
+    Every node on a SingleThreadedExecutor (``graph.SpinningGraph``); the
+    coordinator's goals on the model loop (``build_nodes``) or on goal threads of
+    its own (the nodes as ``ros2 run`` starts them).
+    """
     from rclpy.node import Node
 
-    from suspension_tuning.graph import SpinningGraph, build_nodes
+    from suspension_tuning.graph import SpinningGraph
     from suspension_tuning.nodes.coordinator import CoordinatorNode
 
-    nodes = build_nodes(workers=1, record=False, context=ros_context, overrides={
-        'gradient_evaluator': [Parameter('calibration_dir', value=str(tmp_path))],
-        'coordinator': [Parameter('calibration_samples', value=SAMPLES)]})
+    nodes = _nodes(ros_context, tmp_path, request.param == 'model_loop')
     coordinator = next(n for n in nodes if isinstance(n, CoordinatorNode))
     goal_threads: list[int] = []
     execute = coordinator._execute
@@ -43,7 +63,7 @@ def one_process_graph(ros_context, tmp_path):
     client_node = Node('one_process_client', context=ros_context)
     graph = SpinningGraph(nodes, [client_node])
     try:
-        yield nodes, coordinator, client_node, goal_threads
+        yield nodes, coordinator, client_node, goal_threads, graph
     finally:
         graph.shutdown()
 
@@ -60,6 +80,7 @@ def _send(client_node, goal, feedback_callback=None):
                        30.0)
 
 
+@pytest.mark.parametrize('one_process_graph', ['model_loop'], indirect=True)
 def test_ride_optimisation_through_the_one_process_graph_gives_the_in_process_bits(
         one_process_graph):
     from suspension_tuning_interfaces.action import Optimise
@@ -69,7 +90,7 @@ def test_ride_optimisation_through_the_one_process_graph_gives_the_in_process_bi
     from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
     from suspension_tuning.tuning import FullEvaluation, TuningRequest, optimise
 
-    nodes, coordinator, client_node, goal_threads = one_process_graph
+    nodes, coordinator, client_node, goal_threads, _ = one_process_graph
     feedback = []
     handle = _send(client_node, Optimise.Goal(scenario='ride', n_vars=2,
                                               gradient_source='simplified'),
@@ -95,13 +116,13 @@ def test_ride_optimisation_through_the_one_process_graph_gives_the_in_process_bi
     assert result.f == local.f
 
 
-def test_a_goal_on_the_model_loop_is_cancelled_between_iterations(one_process_graph):
+def test_a_goal_is_cancelled_between_iterations(one_process_graph):
     from action_msgs.msg import GoalStatus
     from suspension_tuning_interfaces.action import Optimise
 
     from suspension_tuning.nodes._service_calls import wait_future
 
-    _, _, client_node, _ = one_process_graph
+    _, coordinator, client_node, goal_threads, graph = one_process_graph
     first = threading.Event()
     # Full-model gradients: 2n + 1 = 5 full runs per iteration, so that the cancel
     # (sent at the first feedback) lands while the optimisation still runs.
@@ -116,3 +137,6 @@ def test_a_goal_on_the_model_loop_is_cancelled_between_iterations(one_process_gr
     assert answer.result.message == 'cancelled'
     # Stopped at the iteration after the cancel, not after 20.
     assert 1 <= len(answer.result.history) <= 3
+    # Not on the thread that answered the cancel (the coordinator's executor).
+    executor_thread = graph.threads[graph.nodes.index(coordinator)]
+    assert len(goal_threads) == 1 and goal_threads[0] != executor_thread.ident
