@@ -140,3 +140,24 @@ def test_a_goal_is_cancelled_between_iterations(one_process_graph):
     # Not on the thread that answered the cancel (the coordinator's executor).
     executor_thread = graph.threads[graph.nodes.index(coordinator)]
     assert len(goal_threads) == 1 and goal_threads[0] != executor_thread.ident
+
+
+def test_a_result_asked_for_after_the_goal_ended_still_comes(one_process_graph):
+    """A bad goal ends at once (aborted, with the reason); its result asked later."""
+    import time
+
+    from action_msgs.msg import GoalStatus
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning.nodes._service_calls import wait_future
+
+    _, _, client_node, goal_threads, _ = one_process_graph
+    handle = _send(client_node, Optimise.Goal(scenario='bumpy', n_vars=2))
+    deadline = time.monotonic() + 30.0
+    while not goal_threads and time.monotonic() < deadline:
+        time.sleep(0.01)
+    time.sleep(0.2)  # the goal has ended before its result is asked for
+    answer = wait_future(handle.get_result_async(), 30.0)
+    assert answer.status == GoalStatus.STATUS_ABORTED
+    assert not answer.result.success
+    assert "unknown scenario 'bumpy'" in answer.result.message

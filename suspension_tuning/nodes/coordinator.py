@@ -124,6 +124,18 @@ class GoalThreadActionServer(ActionServer):
         if callback is not None:
             self._run_goal(Task(self._execute_goal, (callback, goal_handle)))
 
+    def add_future(self, future: Any) -> None:
+        """Keep a goal's result future away from the executor.
+
+        rclpy registers it so that the executor runs its done callback (sending the
+        result to the clients that asked for it) as a task, after a wake-up of its
+        own.  Unregistered, the callback runs on the goal's thread as the goal ends,
+        or on the executor's thread when a result request comes after the end.
+        """
+
+    def remove_future(self, future: Any) -> None:
+        """Nothing to remove (see :meth:`add_future`)."""
+
 
 class CoordinatorNode(Node):
     """Action server ``optimise`` over the simulation workers and gradient evaluator.
