@@ -22,10 +22,13 @@ A :class:`ServiceThread` is one service on a hidden node of its own
 and ``ros2 service`` see ``/<node>/<service>`` as before; global remaps still apply.
 It has a loop of its own unless it is given one to share.  The graph in one process
 (``graph.build_nodes``) serves the first simulation worker's ``evaluate`` and the
-gradient evaluator's ``gradient`` on one loop, so that both models run on one thread
-and share numba's OpenMP team, as in-process: on a thread of its own, the gradient's
-team has slept since the previous iteration, and each 4-design simplified batch took
-1.5 ms longer (4.2 against 2.6-2.7 ms, ``benchmarks/bench_model_threads.py``).
+gradient evaluator's ``gradient`` and ``calibrate`` on one loop, which also runs the
+coordinator's goals (:meth:`ServiceLoop.submit`): both models run on one thread and
+share numba's OpenMP team, as in-process (on a thread of its own, the gradient's team
+has slept since the previous iteration, and each 4-design simplified batch took
+1.5 ms longer: 4.2 against 2.6-2.7 ms, ``benchmarks/bench_model_threads.py``), and a
+goal or a calibration waiting for one of the loop's services answers it on its own
+thread (``_service_calls.ServiceCaller``).
 """
 
 from __future__ import annotations

@@ -57,12 +57,12 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None,
     args : list of str, optional
         Command-line arguments (``--ros-args ...``); default ``sys.argv``.
     multithreaded : bool
-        A MultiThreadedExecutor, for nodes with callbacks that run long (an
-        optimisation, a batch of simulations) while goal, cancel or parameter
+        A MultiThreadedExecutor, for nodes with callbacks that run long while other
         requests must still be answered; otherwise a SingleThreadedExecutor, the
         cheaper per callback.  (Service calls made from a callback take their own
-        responses, ``_service_calls.ServiceCaller``, and the hot services have
-        threads of their own, ``_service_thread.py``: neither needs this executor.)
+        responses, ``_service_calls.ServiceCaller``, the hot services have threads of
+        their own, ``_service_thread.py``, and the coordinator's goals run on goal
+        threads: none of them needs this executor.)
     """
     rclpy.init(args=args)
     node = make_node()
