@@ -130,3 +130,26 @@ def executor(ros_context: object) -> Iterator[SpinningExecutor]:
         yield spinning
     finally:
         spinning.shutdown()
+
+
+@pytest.fixture
+def in_process_ride_optimum():
+    """``run(options, n_samples)``: the 2-variable ride optimisation, in-process.
+
+    Simplified-model gradients scaled by the in-process eq. 25 calibration from
+    ``n_samples`` full-model runs: the bits a run through the graph must reach.
+    """
+    def run(options: dict, n_samples: int):
+        from suspension_tuning import evaluation
+        from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
+        from suspension_tuning.tuning import FullEvaluation, TuningRequest, optimise
+
+        scaling = calibrate('ride', 2, n_samples=n_samples)
+
+        def full_model(points):
+            evaluated = evaluation.evaluate('ride', points)
+            return FullEvaluation(evaluated.f, evaluated.g, evaluated.result)
+
+        return optimise(TuningRequest('ride', 2, None, 'simplified', options), full_model,
+                        SimplifiedGradient('ride', 2, scaling))
+    return run

@@ -82,13 +82,10 @@ def _send(client_node, goal, feedback_callback=None):
 
 @pytest.mark.parametrize('one_process_graph', ['model_loop'], indirect=True)
 def test_ride_optimisation_through_the_one_process_graph_gives_the_in_process_bits(
-        one_process_graph):
+        one_process_graph, in_process_ride_optimum):
     from suspension_tuning_interfaces.action import Optimise
 
-    from suspension_tuning import evaluation
     from suspension_tuning.nodes._service_calls import wait_future
-    from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
-    from suspension_tuning.tuning import FullEvaluation, TuningRequest, optimise
 
     nodes, coordinator, client_node, goal_threads, _ = one_process_graph
     feedback = []
@@ -103,15 +100,7 @@ def test_ride_optimisation_through_the_one_process_graph_gives_the_in_process_bi
     assert nodes[0].evaluate_service.calls == 1 + len(result.history) + 1
     assert len(feedback) == len(result.history)
     assert result.n_calibration_runs == SAMPLES
-    options = coordinator.options.as_dict()
-    scaling = calibrate('ride', 2, n_samples=SAMPLES)
-
-    def full_model(points):
-        run = evaluation.evaluate('ride', points)
-        return FullEvaluation(run.f, run.g, run.result)
-
-    local = optimise(TuningRequest('ride', 2, None, 'simplified', options), full_model,
-                     SimplifiedGradient('ride', 2, scaling))
+    local = in_process_ride_optimum(coordinator.options.as_dict(), SAMPLES)
     np.testing.assert_array_equal(result.x, local.x)
     assert result.f == local.f
 

@@ -42,13 +42,11 @@ def graph(ros_context, executor, tmp_path):
     return {'sim': sim, 'gradient': gradient, 'coordinator': coordinator, 'client': client}
 
 
-def test_ride_optimisation_with_simplified_gradients_converges_through_the_graph(graph):
+def test_ride_optimisation_with_simplified_gradients_converges_through_the_graph(
+        graph, in_process_ride_optimum):
     from rclpy.action import ActionClient
     from suspension_tuning_interfaces.action import Optimise
 
-    from suspension_tuning import evaluation
-    from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
-    from suspension_tuning.tuning import FullEvaluation, TuningRequest, optimise
 
     client = ActionClient(graph['client'], Optimise, '/coordinator/optimise')
     assert client.wait_for_server(timeout_sec=10.0)
@@ -67,15 +65,7 @@ def test_ride_optimisation_with_simplified_gradients_converges_through_the_graph
     assert result.n_simplified_runs % (2 * n) == 0 and result.n_simplified_runs > 0
     assert len(feedback) == len(result.history)
     # The same loop in-process, with the in-process eq. 25 calibration: same bits.
-    options = graph['coordinator'].options.as_dict()
-    scaling = calibrate('ride', 2, n_samples=SAMPLES)
-
-    def full_model(points):
-        run = evaluation.evaluate('ride', points)
-        return FullEvaluation(run.f, run.g, run.result)
-
-    local = optimise(TuningRequest('ride', 2, None, 'simplified', options), full_model,
-                     SimplifiedGradient('ride', 2, scaling))
+    local = in_process_ride_optimum(graph['coordinator'].options.as_dict(), SAMPLES)
     np.testing.assert_array_equal(result.x, local.x)
     assert result.f == local.f
     assert result.n_simplified_runs == local.n_simplified_runs
