@@ -63,6 +63,21 @@ def format_result(result) -> str:
     return '\n'.join(lines)
 
 
+def wait_result(client: ActionClient, handle, poll_s: float = 1.0) -> Optimise.Result | None:
+    """The goal's result; None if the action server goes away first.
+
+    DDS says at once when a server shuts down; a killed one drops out of the graph
+    when its lease runs out (Fast DDS: 20 s by default).
+    """
+    future = handle.get_result_async()
+    while True:
+        try:
+            return wait_future(future, poll_s).result
+        except TimeoutError:
+            if not client.server_is_ready():
+                return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``ros2 run suspension_tuning tune``."""
     args_list = sys.argv[1:] if argv is None else argv
@@ -91,7 +106,11 @@ def main(argv: list[str] | None = None) -> int:
             print('error: goal rejected', file=sys.stderr)
             return 2
         try:
-            result = wait_future(handle.get_result_async()).result
+            result = wait_result(client, handle)
+            if result is None:
+                print(f'error: the action server {args.action} went away before the result',
+                      file=sys.stderr)
+                return 1
         except KeyboardInterrupt:
             print('cancelling ...', file=sys.stderr)
             wait_future(handle.cancel_goal_async(), 10.0)

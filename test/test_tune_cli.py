@@ -35,3 +35,37 @@ def test_tune_without_a_coordinator_says_so(ros_context):
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 2
     assert 'no action server /nobody/optimise' in run.stderr
+
+
+def test_tune_says_so_when_the_coordinator_goes_away_before_the_result(ros_context, executor):
+    """A server that vanishes mid-goal: an error on stderr and exit status 1, no hang."""
+    import threading
+
+    from rclpy.action import ActionServer
+    from rclpy.node import Node
+    from suspension_tuning_interfaces.action import Optimise
+
+    started, release = threading.Event(), threading.Event()
+
+    def execute(goal_handle):
+        started.set()
+        release.wait(60.0)  # holds the goal until the server is gone
+        goal_handle.abort()
+        return Optimise.Result()
+
+    node = Node('vanishing_coordinator', context=ros_context)
+    server = ActionServer(node, Optimise, '/vanishing/optimise', execute)
+    executor.add(node)
+    tune = Path(sys.prefix) / 'bin' / 'tune'
+    process = subprocess.Popen([str(tune), '--action', '/vanishing/optimise'],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert started.wait(60.0), 'the goal never arrived'
+        server.destroy()  # the action server leaves the graph mid-goal
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        release.set()
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 1
+    assert 'the action server /vanishing/optimise went away before the result' in stderr
