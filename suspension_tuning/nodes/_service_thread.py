@@ -194,7 +194,8 @@ class ServiceLoop:
         try:
             self._serve_until_stopped()
         finally:
-            with self._lock:
+            with self._lock:  # no job is queued after this: submit() sees _stopping
+                self._stopping = True
                 jobs, self._jobs = list(self._jobs), collections.deque()
             for future, _, _ in jobs:
                 future.cancel()
