@@ -70,12 +70,12 @@ def wait_result(client: ActionClient, handle, poll_s: float = 1.0) -> Optimise.R
     when its lease runs out (Fast DDS: 20 s by default).
     """
     future = handle.get_result_async()
-    while True:
-        try:
-            return wait_future(future, poll_s).result
-        except TimeoutError:
-            if not client.server_is_ready():
-                return None
+    done = threading.Event()
+    future.add_done_callback(lambda _: done.set())
+    while not done.wait(poll_s):
+        if not client.server_is_ready():
+            return None
+    return future.result().result
 
 
 def main(argv: list[str] | None = None) -> int:
