@@ -198,8 +198,8 @@ class CoordinatorNode(Node):
         if self.goal_loop is not None:
             try:
                 future = self.goal_loop.submit(self._execute_task, task)
-            except RuntimeError:
-                future = None
+            except RuntimeError:  # the loop has stopped: a goal thread instead
+                pass
         if future is None:
             future = self.goal_threads.submit(self._execute_task, task)
         self.goals = [goal for goal in self.goals if not goal.done()] + [future]
