@@ -4,8 +4,8 @@ Runs the 2-variable ride optimisation with simplified-model gradients (eq. 25
 calibration from 30 full-model samples included) twice:
 
 - in-process: ``tuning.optimise`` calling the physics directly;
-- through the graph: simulation worker, gradient evaluator and coordinator nodes in
-  this process, spinning as in ``graph`` and ``make demo`` (``graph.SpinningGraph``),
+- through the graph: the nodes of ``graph`` and ``make demo`` (``graph.build_nodes``,
+  without the recorder) in this process, spinning as there (``graph.SpinningGraph``),
   the goal sent by an action client (calibration over the graph too, from an empty
   cache each time).  The graph stays up for all runs, as a deployed graph does; one
   untimed warm-up goal first starts its worker threads.
@@ -104,28 +104,25 @@ class Graph:
         from rclpy.parameter import Parameter
         from suspension_tuning_interfaces.action import Optimise
 
-        from suspension_tuning.graph import SpinningGraph, model_service_loop
+        from suspension_tuning.graph import SpinningGraph, build_nodes
         from suspension_tuning.nodes.coordinator import CoordinatorNode
-        from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
-        from suspension_tuning.nodes.gradient_evaluator import GradientEvaluatorNode
 
         rclpy.init()
         self.cache = tempfile.mkdtemp(prefix='bench_graph_calibration_')
-        # As graph.build_nodes: evaluate, gradient, calibrate and goals on one thread.
-        loop = model_service_loop()
-        self.nodes = [FullVehicleSimNode(service_loop=loop),
-                      GradientEvaluatorNode(service_loop=loop, parameter_overrides=[
-                          Parameter('calibration_dir', value=self.cache)]),
-                      CoordinatorNode(goal_loop=loop, parameter_overrides=[
-                          Parameter('calibration_samples', value=SAMPLES),
-                          Parameter('final_telemetry', value=False)])]
+        # The nodes of `graph` (graph.build_nodes), without the recorder: evaluate,
+        # gradient, calibrate and the goals on the model loop.
+        self.nodes = build_nodes(workers=1, record=False, overrides={
+            'gradient_evaluator': [Parameter('calibration_dir', value=self.cache)],
+            'coordinator': [Parameter('calibration_samples', value=SAMPLES),
+                            Parameter('final_telemetry', value=False)]})
+        self.coordinator = next(n for n in self.nodes if isinstance(n, CoordinatorNode))
         self.client_node = Node('bench_graph_client')
         self.graph = SpinningGraph(self.nodes, [self.client_node])
         self.client = ActionClient(self.client_node, Optimise, '/coordinator/optimise')
         self.client.wait_for_server(timeout_sec=30.0)
         self.goal = Optimise.Goal(scenario=SCENARIO, n_vars=N_VARS,
                                   gradient_source='simplified')
-        self.options = self.nodes[2].options.as_dict()
+        self.options = self.coordinator.options.as_dict()
 
     def run(self) -> tuple[float, object]:
         """One optimisation from an empty calibration cache; (wall time, result)."""
@@ -148,7 +145,7 @@ class Graph:
         """
         from rcl_interfaces.srv import GetParameters
 
-        caller = self.nodes[2].caller
+        caller = self.coordinator.caller
         client = caller.create_client(GetParameters, '/full_vehicle_sim/get_parameters')
         request = GetParameters.Request(names=['telemetry_decimation'])
         times = []
