@@ -31,7 +31,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Task
 from std_msgs.msg import String
 from suspension_tuning_interfaces.action import Optimise
-from suspension_tuning_interfaces.msg import IterationRecord
+from suspension_tuning_interfaces.msg import IterationRecord, TimeHistories
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning.nodes import _logging
@@ -229,9 +229,12 @@ class CoordinatorNode(Node):
 
     def _full_model(self, request: TuningRequest):
         def evaluate(designs: np.ndarray) -> FullEvaluation:
+            # The simplified handling model runs on the inputs of the full run at x
+            # (simplified_inputs.py); the ride model needs none.
             responses = self.pool.evaluate(
                 request.scenario, request.n_vars, designs,
-                return_inputs=request.gradient_source == 'simplified' and len(designs) == 1)
+                return_inputs=(request.gradient_source == 'simplified' and len(designs) == 1
+                               and request.scenario == 'handling'))
             f = np.concatenate([np.asarray(r.f, float) for r in responses])
             g = np.concatenate([np.asarray(r.g, float).reshape(r.n_designs, r.n_constraints)
                                 for r in responses])
@@ -243,7 +246,8 @@ class CoordinatorNode(Node):
         def gradient(x: np.ndarray, inputs: Any) -> tuple[np.ndarray, np.ndarray]:
             response = self.caller.call(self.gradient_client, EvaluateGradient.Request(
                 scenario=request.scenario, n_vars=request.n_vars, x=x.tolist(),
-                step=request.fd_step, inputs=inputs), self.timeout_s)
+                step=request.fd_step,
+                inputs=TimeHistories() if inputs is None else inputs), self.timeout_s)
             if not response.success:
                 raise ValueError(f'gradient evaluator: {response.error}')
             dg = np.asarray(response.dg, float).reshape(response.n_constraints, request.n_vars)

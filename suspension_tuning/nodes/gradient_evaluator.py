@@ -93,7 +93,7 @@ class GradientEvaluatorNode(Node):
                 except ValueError as error:
                     self.get_logger().warning(f'stale calibration {path}: {error}')
             if scaling is None:
-                scaling = self._calibrate_remote(scenario, n_vars, x, n_samples, seed)
+                scaling = self._calibrate_remote(scenario, n_vars, x, key)
                 response.n_full_runs = n_samples
                 path.parent.mkdir(parents=True, exist_ok=True)
                 scaling.save(path)
@@ -117,21 +117,23 @@ class GradientEvaluatorNode(Node):
             + ', '.join(f'{f.name} R2={f.r2:.3f}' for f in scaling.functions))
         return response
 
-    def _calibrate_remote(self, scenario: str, n_vars: int, x: np.ndarray, n_samples: int,
-                          seed: int) -> Scaling:
+    def _calibrate_remote(self, scenario: str, n_vars: int, x: np.ndarray,
+                          key: dict) -> Scaling:
         """Full-model samples from a simulation worker, then the eq. 25 fit."""
         timeout = float(self.get_parameter('call_timeout_s').value)
+        # Only the handling model needs each sample's inputs (simplified_inputs.py).
         answer = self.caller.call(self.sim_client, EvaluateDesign.Request(
-            scenario=scenario, n_vars=n_vars, designs=x.ravel().tolist(), return_inputs=True),
-            timeout)
+            scenario=scenario, n_vars=n_vars, designs=x.ravel().tolist(),
+            return_inputs=scenario == 'handling'), timeout)
         if not answer.success:
             raise ValueError(f'full-model samples failed: {answer.error}')
         full_f = np.asarray(answer.f, dtype=float)
-        full_g = np.asarray(answer.g, dtype=float).reshape(n_samples, answer.n_constraints)
+        full_g = np.asarray(answer.g, dtype=float).reshape(len(x), answer.n_constraints)
         inputs = [simplified_inputs.unpack(scenario, message, x[i])
                   for i, message in enumerate(answer.inputs)] or None
-        self.simplified_runs += n_samples
-        return fit_calibration(scenario, n_vars, x, full_f, full_g, inputs, n_samples, seed)
+        self.simplified_runs += len(x)
+        return fit_calibration(scenario, n_vars, x, full_f, full_g, inputs, len(x),
+                               key['seed'], key)
 
     # ----------------------------------------------------------------- gradient
     def _on_gradient(self, request: EvaluateGradient.Request,

@@ -100,11 +100,14 @@ def fit_calibration(
     inputs: list[SimplifiedInputs] | None,
     n_samples: int,
     seed: int,
+    key: dict[str, Any] | None = None,
 ) -> Scaling:
     """Eq. 25 fit from full-model values at the calibration designs.
 
     The simplified model runs at the same designs; for handling each sample uses the
-    inputs captured from its own full run (``inputs[i]``), as at an iterate.
+    inputs captured from its own full run (``inputs[i]``), as at an iterate.  ``key``
+    is the calibration's :func:`~suspension_tuning.optim.scaling.scaling_key` when the
+    caller has it already (it hashes the model configuration files).
     """
     full = np.column_stack([np.asarray(full_f, dtype=float), np.asarray(full_g, dtype=float)])
     if scenario == 'ride':
@@ -115,7 +118,9 @@ def fit_calibration(
         simp = np.vstack(
             [simplified_values(scenario, x[i], n_vars, inputs[i]) for i in range(len(x))]
         )
-    return fit_scaling(x, full, simp, key=scaling_key(scenario, n_vars, n_samples, seed))
+    if key is None:
+        key = scaling_key(scenario, n_vars, n_samples, seed)
+    return fit_scaling(x, full, simp, key=key)
 
 
 def calibrate(
