@@ -130,7 +130,7 @@ class Graph:
 
         shutil.rmtree(self.cache)
         os.mkdir(self.cache)
-        start = time.perf_counter()
+        start = self.started = time.perf_counter()
         handle = wait_future(self.client.send_goal_async(self.goal))
         result = wait_future(handle.get_result_async()).result
         return time.perf_counter() - start, result
