@@ -101,12 +101,9 @@ class SpinningExecutor:
         self._thread.start()
 
     def _spin(self) -> None:
-        from rclpy.executors import ExternalShutdownException
+        from suspension_tuning.nodes._spin import spin_until_shutdown
 
-        try:
-            self.executor.spin()
-        except ExternalShutdownException:
-            pass
+        spin_until_shutdown(self.executor)  # ends quietly when shut down
 
     def add(self, *nodes: object) -> None:
         """Add nodes; they are destroyed when the executor shuts down."""

@@ -59,3 +59,33 @@ def test_spinning_until_done_stops_when_the_condition_holds_or_the_context_goes(
         assert context.ok()
     finally:
         context.shutdown()
+
+
+def test_a_guard_condition_destroyed_by_the_executors_shutdown_is_a_clean_stop():
+    """ros2/rclpy#968: shutdown() from another thread destroys the executor's guard
+    condition while a task of the spin may still trigger it."""
+    from rclpy.exceptions import InvalidHandle
+    from rclpy.node import Node
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = Node('spin_guard', context=context)
+    guard = node.create_guard_condition(lambda: None)
+    executor = SingleThreadedExecutor(context=context)
+
+    def spin(shut_down_first: bool):
+        if shut_down_first:
+            executor.shutdown()
+        guard.destroy()
+        guard.trigger()  # raises InvalidHandle, as the spin's task does
+
+    try:
+        executor.spin = lambda: spin(shut_down_first=False)
+        with pytest.raises(InvalidHandle):  # not shut down: a real error, raised
+            spin_until_shutdown(executor)
+        guard = node.create_guard_condition(lambda: None)
+        executor.spin = lambda: spin(shut_down_first=True)
+        spin_until_shutdown(executor)  # returns: no exception escapes
+    finally:
+        node.destroy_node()
+        context.shutdown()

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import rclpy
+from rclpy.exceptions import InvalidHandle
 from rclpy.executors import (
     Executor,
     ExternalShutdownException,
@@ -23,7 +24,11 @@ def spin_until_shutdown(executor: Executor,
     rclpy's signal handler has shut the context down.  When the interrupt lands in a
     ``__del__`` (e.g. of an rclpy Future) Python prints and drops it, the context is
     shut down all the same, and the next spin fails to build its wait set with an
-    RCLError: that is a shutdown too, not a crash.
+    RCLError: that is a shutdown too, not a crash.  So is an InvalidHandle once the
+    executor has been shut down from another thread (``SpinningGraph.shutdown``):
+    rclpy's ``Executor.shutdown`` destroys the executor's guard condition without
+    waiting for the spin's tasks, and a task that is still running triggers it
+    (ros2/rclpy#968, open; Jazzy).
 
     Parameters
     ----------
@@ -43,6 +48,9 @@ def spin_until_shutdown(executor: Executor,
         pass
     except _rclpy.RCLError:
         if executor.context.ok():
+            raise
+    except InvalidHandle:
+        if not getattr(executor, '_is_shutdown', False):  # rclpy's flag, set first
             raise
 
 
