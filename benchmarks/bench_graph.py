@@ -14,7 +14,8 @@ Prints ``name: value`` lines, ending with ``ros_overhead_fraction`` = graph wall
 in-process wall time - 1 (target <= 0.02): the median over 20 pairs of runs made
 next to each other, in alternating order, so that the machine's drift of its speed
 (+-10 % over minutes on a shared machine) cancels within a pair; the interquartile
-range of the pairs and the ratio of the two medians are printed too.  Both runs must
+range of the pairs and the ratio of the two medians are printed too (``--pairs N`` for
+another number of pairs).  Both runs must
 reach the same bits.  It also prints the time the graph adds with the time spent
 inside the models removed from both runs (``ros_overhead_fraction_model_time_removed``).
 DDS stays on loopback with a domain of its own.
@@ -163,8 +164,15 @@ class Graph:
         shutil.rmtree(self.cache, ignore_errors=True)
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
     from suspension_tuning import evaluation
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--pairs', type=int, default=REPEATS,
+                        help=f'pairs of runs to take the median over (default {REPEATS})')
+    pairs = parser.parse_args(argv).pairs
 
     evaluation.evaluate(SCENARIO, np.full((1, N_VARS), 0.5))  # compile / load the kernels
     clock = ModelClock()
@@ -173,7 +181,7 @@ def main() -> int:
     # OpenMP thread teams (numba's parallel kernel), a one-off cost of a new graph.
     graph.run()
     graph_times, local_times, graph_model, local_model = [], [], [], []
-    for repeat in range(REPEATS):
+    for repeat in range(pairs):
         # Pairs close in time, in alternating order: the machine's speed drifts by
         # +-10 % over minutes, and whichever run goes second in a pair may differ.
         for which in (('graph', 'local') if repeat % 2 == 0 else ('local', 'graph')):
@@ -200,7 +208,7 @@ def main() -> int:
     print(f'same_result_bits: {same}')
     print(f'in_process_wall_s: {local_s:.3f}')
     print(f'graph_wall_s: {graph_s:.3f}')
-    print(f'repeats_median_of: {REPEATS}')
+    print(f'repeats_median_of: {pairs}')
     print('graph_runs_s: ' + ' '.join(f'{t:.3f}' for t in graph_times))
     print('in_process_runs_s: ' + ' '.join(f'{t:.3f}' for t in local_times))
     # Round trips: one evaluate per iteration (n_full_runs), one gradient call per 2n
