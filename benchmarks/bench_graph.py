@@ -46,7 +46,9 @@ class ModelClock:
 
     Physics dominates both runs and varies by +-10 % from run to run on a shared
     machine; subtracting it leaves the time the graph itself adds (service calls,
-    serialisation, executors), which is what the ROS overhead is.
+    serialisation, executors), which is what the ROS overhead is.  Each call is
+    also kept in :attr:`calls` as ``(kind, entry time, exit time)``, kind 'full' or
+    'simplified' (``bench_graph_phases.py``).
     """
 
     def __init__(self) -> None:
@@ -54,18 +56,22 @@ class ModelClock:
         from suspension_tuning import evaluation
 
         self.seconds = 0.0
+        self.calls: list[tuple[str, float, float]] = []
         self._lock = threading.Lock()
-        for module, name in ((evaluation, 'evaluate'), (simplified, 'simplified_values')):
-            setattr(module, name, self._timed(getattr(module, name)))
+        for module, name, kind in ((evaluation, 'evaluate', 'full'),
+                                   (simplified, 'simplified_values', 'simplified')):
+            setattr(module, name, self._timed(getattr(module, name), kind))
 
-    def _timed(self, function):
+    def _timed(self, function, kind: str):
         def timed(*args, **kwargs):
             start = time.perf_counter()
             try:
                 return function(*args, **kwargs)
             finally:
+                end = time.perf_counter()
                 with self._lock:
-                    self.seconds += time.perf_counter() - start
+                    self.seconds += end - start
+                    self.calls.append((kind, start, end))
         return timed
 
     def take(self) -> float:

@@ -31,30 +31,9 @@ import numpy as np
 
 PAIRS = 10
 
-#: (kind, entry time, exit time) of every model call of the running optimisation.
-calls: list[tuple[str, float, float]] = []
 
-
-def instrument() -> None:
-    """Timestamp every full-model and simplified-model call, in any thread."""
-    import suspension_tuning.optim.simplified_gradient as simplified
-    from suspension_tuning import evaluation
-
-    for module, name, kind in ((evaluation, 'evaluate', 'full'),
-                               (simplified, 'simplified_values', 'simplified')):
-        function = getattr(module, name)
-
-        def timed(*args, _function=function, _kind=kind, **kwargs):
-            start = time.perf_counter()
-            try:
-                return _function(*args, **kwargs)
-            finally:
-                calls.append((_kind, start, time.perf_counter()))
-
-        setattr(module, name, timed)
-
-
-def phases(start: float, end: float) -> tuple[list[str], np.ndarray, np.ndarray]:
+def phases(calls: list[tuple[str, float, float]], start: float, end: float
+           ) -> tuple[list[str], np.ndarray, np.ndarray]:
     """(kinds of the calls, gaps (n + 1), call durations (n)) of one run, s."""
     run = list(calls)
     kinds = [kind for kind, _, _ in run]
@@ -68,20 +47,20 @@ def main() -> int:
     from suspension_tuning import evaluation
 
     evaluation.evaluate(bench_graph.SCENARIO, np.full((1, bench_graph.N_VARS), 0.5))
-    instrument()
+    clock = bench_graph.ModelClock()  # timestamps every model call, in any thread
     graph = bench_graph.Graph()
     graph.run()  # warm-up: worker threads and their OpenMP teams
     runs: dict[str, list] = {'graph': [], 'local': []}
     for pair in range(PAIRS):
         for which in (('graph', 'local') if pair % 2 == 0 else ('local', 'graph')):
-            calls.clear()
+            clock.calls.clear()
             start = time.perf_counter()
             if which == 'graph':
                 graph.run()
                 start = graph.started  # as bench_graph times it: from the goal's send
             else:
                 bench_graph.in_process(graph.options)
-            runs[which].append(phases(start, time.perf_counter()))
+            runs[which].append(phases(clock.calls, start, time.perf_counter()))
     graph.close()
     kinds = runs['graph'][0][0]
     if any(run[0] != kinds for run in runs['graph'] + runs['local']) or kinds[:2] != [
