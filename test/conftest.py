@@ -130,23 +130,26 @@ def executor(ros_context: object) -> Iterator[SpinningExecutor]:
 
 
 @pytest.fixture
-def in_process_ride_optimum():
-    """``run(options, n_samples)``: the 2-variable ride optimisation, in-process.
+def in_process_optimum():
+    """``run(options, n_samples, scenario='ride')``: the 2-variable optimisation, in-process.
 
     Simplified-model gradients scaled by the in-process eq. 25 calibration from
-    ``n_samples`` full-model runs: the bits a run through the graph must reach.
+    ``n_samples`` full-model runs, the full model through ``evaluation.evaluate`` as
+    in the simulation node (handling: its steering and slip angles go to the
+    simplified model, paper 6.1): the bits a run through the graph must reach.
     """
-    def run(options: dict, n_samples: int):
+    def run(options: dict, n_samples: int, scenario: str = 'ride'):
         from suspension_tuning import evaluation
         from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
         from suspension_tuning.tuning import FullEvaluation, TuningRequest, optimise
 
-        scaling = calibrate('ride', 2, n_samples=n_samples)
+        scaling = calibrate(scenario, 2, n_samples=n_samples,
+                            run_full=lambda name, x: evaluation.evaluate(name, x).result)
 
         def full_model(points):
-            evaluated = evaluation.evaluate('ride', points)
+            evaluated = evaluation.evaluate(scenario, points)
             return FullEvaluation(evaluated.f, evaluated.g, evaluated.result)
 
-        return optimise(TuningRequest('ride', 2, None, 'simplified', options), full_model,
-                        SimplifiedGradient('ride', 2, scaling))
+        return optimise(TuningRequest(scenario, 2, None, 'simplified', options), full_model,
+                        SimplifiedGradient(scenario, 2, scaling))
     return run

@@ -82,7 +82,7 @@ def _send(client_node, goal, feedback_callback=None):
 
 @pytest.mark.parametrize('one_process_graph', ['model_loop'], indirect=True)
 def test_ride_optimisation_through_the_one_process_graph_gives_the_in_process_bits(
-        one_process_graph, in_process_ride_optimum):
+        one_process_graph, in_process_optimum):
     from suspension_tuning_interfaces.action import Optimise
 
     from suspension_tuning.nodes._service_calls import wait_future
@@ -100,41 +100,30 @@ def test_ride_optimisation_through_the_one_process_graph_gives_the_in_process_bi
     assert nodes[0].evaluate_service.calls == 1 + len(result.history) + 1
     assert len(feedback) == len(result.history)
     assert result.n_calibration_runs == SAMPLES
-    local = in_process_ride_optimum(coordinator.options.as_dict(), SAMPLES)
+    local = in_process_optimum(coordinator.options.as_dict(), SAMPLES)
     np.testing.assert_array_equal(result.x, local.x)
     assert result.f == local.f
 
 
 @pytest.mark.parametrize('one_process_graph', ['model_loop'], indirect=True)
 def test_handling_optimisation_passes_the_full_runs_inputs_to_the_gradient(
-        one_process_graph):
+        one_process_graph, in_process_optimum):
     """Paper 6.1: the simplified handling model runs on the full run's steering and
     slip angles at x.  They travel in the evaluate response and the gradient request
     (``simplified_inputs.pack``/``unpack``); the graph must reach the in-process bits,
     where the inputs are handed over as arrays."""
     from suspension_tuning_interfaces.action import Optimise
 
-    from suspension_tuning import evaluation
     from suspension_tuning.nodes._service_calls import wait_future
-    from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
-    from suspension_tuning.tuning import FullEvaluation, TuningRequest, optimise
 
-    nodes, coordinator, client_node, _, _ = one_process_graph
+    _, coordinator, client_node, _, _ = one_process_graph
     handle = _send(client_node, Optimise.Goal(scenario='handling', n_vars=2,
                                               gradient_source='simplified'))
     result = wait_future(handle.get_result_async(), 300.0).result
     assert result.success, result.message
     assert result.n_calibration_runs == SAMPLES
 
-    def full_model(points):
-        evaluated = evaluation.evaluate('handling', points)
-        return FullEvaluation(evaluated.f, evaluated.g, evaluated.result)
-
-    scaling = calibrate('handling', 2, n_samples=SAMPLES,
-                        run_full=lambda name, x: evaluation.evaluate(name, x).result)
-    local = optimise(TuningRequest('handling', 2, None, 'simplified',
-                                   coordinator.options.as_dict()),
-                     full_model, SimplifiedGradient('handling', 2, scaling))
+    local = in_process_optimum(coordinator.options.as_dict(), SAMPLES, 'handling')
     assert result.iterations == local.nit
     assert result.n_simplified_runs == local.n_simplified_runs
     np.testing.assert_array_equal(result.x, local.x)

@@ -43,7 +43,7 @@ def graph(ros_context, executor, tmp_path):
 
 
 def test_ride_optimisation_with_simplified_gradients_converges_through_the_graph(
-        graph, in_process_ride_optimum):
+        graph, in_process_optimum):
     from rclpy.action import ActionClient
     from suspension_tuning_interfaces.action import Optimise
 
@@ -65,7 +65,7 @@ def test_ride_optimisation_with_simplified_gradients_converges_through_the_graph
     assert result.n_simplified_runs % (2 * n) == 0 and result.n_simplified_runs > 0
     assert len(feedback) == len(result.history)
     # The same loop in-process, with the in-process eq. 25 calibration: same bits.
-    local = in_process_ride_optimum(graph['coordinator'].options.as_dict(), SAMPLES)
+    local = in_process_optimum(graph['coordinator'].options.as_dict(), SAMPLES)
     np.testing.assert_array_equal(result.x, local.x)
     assert result.f == local.f
     assert result.n_simplified_runs == local.n_simplified_runs
