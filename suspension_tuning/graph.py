@@ -52,8 +52,9 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
         raise ValueError(f'need at least one simulation worker, got {workers}')
     names = ['full_vehicle_sim'] if workers == 1 else [f'sim_{i}' for i in range(workers)]
     # The first worker's evaluate, the gradient evaluator's services and the
-    # coordinator's goals share one thread, so that the models run on one thread, as
-    # in-process, and calls among them need no hand-over (model_service_loop).
+    # coordinator's action server and goals share one thread, so that the models run
+    # on one thread, as in-process, and calls among them need no hand-over
+    # (model_service_loop).
     loop = model_service_loop(context)
     overrides = overrides or {}
 
@@ -82,8 +83,9 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
 def model_service_loop(context=None) -> ServiceLoop:
     """The one thread of the models' services and the coordinator's goals.
 
-    It serves the first simulation worker's ``evaluate`` and the gradient
-    evaluator's ``gradient`` and ``calibrate``, and runs the coordinator's goals.
+    It serves the first simulation worker's ``evaluate``, the gradient evaluator's
+    ``gradient`` and ``calibrate`` and the coordinator's action server, and runs the
+    coordinator's goals (a goal is taken, accepted and started on this thread).
     Both models then run on one thread and share numba's OpenMP team, which stays
     awake between them as in an in-process run; on two threads the gradient's team
     sleeps through each full-model run, and each 4-design simplified batch took

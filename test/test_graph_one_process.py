@@ -1,9 +1,10 @@
 """The whole graph in one process (``ros2 run suspension_tuning graph``, ``make demo``).
 
 ``graph.build_nodes`` puts the first simulation worker's ``evaluate``, the gradient
-evaluator's services and the coordinator's goals on one thread (the model loop): a
-goal's calls to those services are answered on the goal's own thread, while the
-coordinator's single-threaded executor stays free for cancel requests.  A 2-variable
+evaluator's services, the coordinator's action server and its goals on one thread
+(the model loop): a goal is taken and run there, its calls to those services are
+answered on its own thread, and cancel and result requests are answered while it
+waits for a service.  A 2-variable
 ride optimisation through it must reach the in-process bits, with every call made
 over the middleware as before (the services count their calls), and a cancel must
 stop it.
@@ -106,6 +107,31 @@ def test_ride_optimisation_through_the_one_process_graph_gives_the_in_process_bi
 
 
 @pytest.mark.parametrize('one_process_graph', ['model_loop'], indirect=True)
+def test_the_model_loop_takes_the_goal_not_the_coordinators_executor(one_process_graph):
+    """The goal request is accepted on the model loop, which then runs the goal."""
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning.nodes._service_calls import wait_future
+
+    _, coordinator, client_node, goal_threads, graph = one_process_graph
+    accepted_on = []
+    accept = coordinator.server._goal_callback
+
+    def recording_accept(goal):
+        accepted_on.append(threading.get_ident())
+        return accept(goal)
+
+    coordinator.server.register_goal_callback(recording_accept)
+    assert coordinator.server not in list(coordinator.waitables)  # not the executor's
+    handle = _send(client_node, Optimise.Goal(scenario='bumpy', n_vars=2))
+    answer = wait_future(handle.get_result_async(), 30.0)
+    assert "unknown scenario 'bumpy'" in answer.result.message
+    loop_thread = coordinator.goal_loop._thread.ident
+    assert accepted_on == [loop_thread] and goal_threads == [loop_thread]
+    assert graph.threads[graph.nodes.index(coordinator)].ident != loop_thread
+
+
+@pytest.mark.parametrize('one_process_graph', ['model_loop'], indirect=True)
 def test_handling_optimisation_passes_the_full_runs_inputs_to_the_gradient(
         one_process_graph, in_process_optimum):
     """Paper 6.1: the simplified handling model runs on the full run's steering and
@@ -145,13 +171,15 @@ def test_a_goal_is_cancelled_between_iterations(one_process_graph):
                    lambda _: first.set())
     assert first.wait(120.0), 'no feedback'
     cancel = wait_future(handle.cancel_goal_async(), 30.0)
-    assert len(cancel.goals_canceling) == 1  # accepted by the coordinator's executor
+    # Accepted while the goal waited for a service (model loop) or by the coordinator's
+    # executor (goal threads).
+    assert len(cancel.goals_canceling) == 1
     answer = wait_future(handle.get_result_async(), 300.0)
     assert answer.status == GoalStatus.STATUS_CANCELED
     assert answer.result.message == 'cancelled'
     # Stopped at the iteration after the cancel, not after 20.
     assert 1 <= len(answer.result.history) <= 3
-    # Not on the thread that answered the cancel (the coordinator's executor).
+    # Never on the coordinator's executor.
     executor_thread = graph.threads[graph.nodes.index(coordinator)]
     assert len(goal_threads) == 1 and goal_threads[0] != executor_thread.ident
 

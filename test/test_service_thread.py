@@ -184,3 +184,48 @@ def test_a_server_gone_since_its_last_answer_is_reported_vanished_not_waited_for
     finally:
         caller.destroy()
         owner.destroy_node()
+
+
+def test_an_action_server_on_a_loop_is_served_there_and_an_awaiting_callback_is_dropped(
+        ros_context):
+    """LoopActionServer: goal requests are taken on the loop's thread; a goal callback
+    that awaits (it cannot be run to its end there) is dropped with an error logged,
+    and the loop goes on serving."""
+    from rclpy.action import ActionClient, ActionServer
+    from rclpy.task import Future
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning.nodes._service_thread import LoopActionServer
+
+    owner = rclpy.create_node('owner', context=ros_context)
+    loop = ServiceLoop(ros_context, 'test')
+    service = ServiceThread(owner, EvaluateDesign, 'evaluate', _echo, loop=loop)
+    entered = []
+
+    async def awaiting_goal_callback(goal):
+        entered.append(threading.get_ident())
+        await Future()  # never done
+
+    server = ActionServer(owner, Optimise, 'optimise', lambda handle: Optimise.Result(),
+                          goal_callback=awaiting_goal_callback)
+    action = LoopActionServer(owner, server, '/optimise', loop)
+    caller = ServiceCaller(owner)
+    client = ActionClient(caller.node, Optimise, '/optimise')
+    try:
+        assert server not in list(owner.waitables)  # no executor of the node takes goals
+        assert client.wait_for_server(timeout_sec=10.0)
+        client.send_goal_async(Optimise.Goal(scenario='ride', n_vars=2))
+        deadline = time.monotonic() + 10.0
+        while not entered and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert entered == [loop._thread.ident]
+        evaluate = caller.create_client(EvaluateDesign, service.service_name)
+        assert caller.call(evaluate, _request(0.5, 0.5), 10.0).n_designs == 1
+        assert loop.alive
+    finally:
+        client.destroy()
+        caller.destroy()
+        action.destroy()
+        service.destroy()
+        server.destroy()
+        owner.destroy_node()

@@ -22,6 +22,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.utilities import timeout_sec_to_nsec
+from rclpy.waitable import NumberOfEntities, Waitable
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
 if TYPE_CHECKING:
@@ -78,23 +79,36 @@ def wait_ready(context: Any, timeout_ns: int, clients: Sequence[Any] = (),
         Context of the entities.
     timeout_ns : int
         Longest wait, ns; -1 waits until something is ready.
-    clients, services, guards : sequences
-        rclpy clients, services and guard conditions to wait on.
+    clients, guards : sequences
+        rclpy clients and guard conditions to wait on.
+    services : sequence
+        rclpy services, and Waitables that serve requests (an action server), to wait
+        on.  A ready Waitable has been asked ``is_ready`` (so its ``take_data`` takes
+        what is in), as an executor does.
     """
     with ExitStack() as handles:
         live: dict[str, list[Any]] = {}
-        for kind, entities in (('client', clients), ('service', services),
-                               ('guard_condition', guards)):
+        waitables = [entity for entity in services if isinstance(entity, Waitable)]
+        for kind, entities in (('client', clients), ('guard_condition', guards),
+                               ('service', [s for s in services
+                                            if not isinstance(s, Waitable)]),
+                               ('waitable', waitables)):
             live[kind] = []
             for entity in entities:
                 try:
-                    handles.enter_context(entity.handle)
+                    # A Waitable is its own context manager (its handle's).
+                    handles.enter_context(entity if kind == 'waitable' else entity.handle)
                 except InvalidHandle:  # destroyed since: not waited on
                     continue
                 live[kind].append(entity)
         handles.enter_context(context.handle)
-        wait_set = _rclpy.WaitSet(0, len(live['guard_condition']), 0, len(live['client']),
-                                  len(live['service']), 0, context.handle)
+        count = NumberOfEntities(0, len(live['guard_condition']), 0, len(live['client']),
+                                 len(live['service']))
+        for waitable in live['waitable']:
+            count += waitable.get_num_entities()
+        wait_set = _rclpy.WaitSet(count.num_subscriptions, count.num_guard_conditions,
+                                  count.num_timers, count.num_clients, count.num_services,
+                                  count.num_events, context.handle)
         wait_set.clear_entities()
         for client in live['client']:
             wait_set.add_client(client.handle)
@@ -102,10 +116,13 @@ def wait_ready(context: Any, timeout_ns: int, clients: Sequence[Any] = (),
             wait_set.add_service(service.handle)
         for guard in live['guard_condition']:
             wait_set.add_guard_condition(guard.handle)
+        for waitable in live['waitable']:
+            waitable.add_to_wait_set(wait_set)
         wait_set.wait(timeout_ns)
         ready = {kind: wait_set.get_ready_entities(kind) for kind in ('client', 'service')}
         return ([c for c in live['client'] if c.handle.pointer in ready['client']],
-                [s for s in live['service'] if s.handle.pointer in ready['service']])
+                [s for s in live['service'] if s.handle.pointer in ready['service']]
+                + [w for w in live['waitable'] if w.is_ready(wait_set)])
 
 
 class ServiceCallError(RuntimeError):

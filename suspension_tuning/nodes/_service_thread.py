@@ -21,9 +21,10 @@ A :class:`ServiceThread` is one service on a hidden node of its own
 (``_<node>_<service>``) that no executor spins, with the owner's full name, so clients
 and ``ros2 service`` see ``/<node>/<service>`` as before; global remaps still apply.
 It has a loop of its own unless it is given one to share.  The graph in one process
-(``graph.build_nodes``) serves the first simulation worker's ``evaluate`` and the
-gradient evaluator's ``gradient`` and ``calibrate`` on one loop, which also runs the
-coordinator's goals (:meth:`ServiceLoop.submit`): both models run on one thread and
+(``graph.build_nodes``) serves the first simulation worker's ``evaluate``, the
+gradient evaluator's ``gradient`` and ``calibrate`` and the coordinator's action server
+(:class:`LoopActionServer`) on one loop, which also runs the coordinator's goals
+(:meth:`ServiceLoop.submit`): both models run on one thread and
 share numba's OpenMP team, as in-process (on a thread of its own, the gradient's team
 has slept since the previous iteration, and each 4-design simplified batch took
 1.5 ms longer: 4.2 against 2.6-2.7 ms, ``benchmarks/bench_model_threads.py``), and a
@@ -71,8 +72,9 @@ class ServiceLoop:
 
     def __init__(self, context: Any, name: str) -> None:
         self.context = context
-        self._entries: list[ServiceThread] = []
-        self._active: list[ServiceThread] = []  # callbacks running on this thread
+        # ServiceThreads and LoopActionServers: what the loop waits on and serves.
+        self._entries: list[Any] = []
+        self._active: list[Any] = []  # callbacks running on this thread
         self._jobs: collections.deque[tuple[Future, Callable[..., Any], tuple]] = (
             collections.deque())
         self._lock = threading.Lock()
@@ -111,7 +113,7 @@ class ServiceLoop:
         self._kick()
         return future
 
-    def idle(self) -> list[ServiceThread]:
+    def idle(self) -> list[Any]:
         """The services a wait on the loop's thread may serve: those not in a callback.
 
         A callback waiting for a response (``calibrate`` for the simulation's
@@ -120,7 +122,7 @@ class ServiceLoop:
         with self._lock:
             return [entry for entry in self._entries if entry not in self._active]
 
-    def serve(self, entry: ServiceThread) -> None:
+    def serve(self, entry: Any) -> None:
         """Take and answer one request of ``entry`` (on the loop's thread)."""
         self._active.append(entry)
         try:
@@ -128,13 +130,13 @@ class ServiceLoop:
         finally:
             self._active.remove(entry)
 
-    def add(self, entry: ServiceThread) -> None:
+    def add(self, entry: Any) -> None:
         """Serve ``entry`` too (from the next wait on)."""
         with self._lock:
             self._entries.append(entry)
         self._kick()
 
-    def remove(self, entry: ServiceThread, timeout_s: float = 5.0) -> None:
+    def remove(self, entry: Any, timeout_s: float = 5.0) -> None:
         """Serve ``entry`` no more; the last one removed stops the thread."""
         with self._lock:
             if entry in self._entries:
@@ -168,7 +170,7 @@ class ServiceLoop:
         except InvalidHandle:  # destroyed: the thread has stopped already
             pass
 
-    def _wait(self) -> list[ServiceThread]:
+    def _wait(self) -> list[Any]:
         """Block until requests are in (their entries) or something changed ([])."""
         entries = self.idle()
         _, ready = wait_ready(self.context, -1, services=[e.service for e in entries],
@@ -297,3 +299,64 @@ class ServiceThread:
         """Leave the loop (the last one stops it, after a running callback) and destroy."""
         self.loop.remove(self, timeout_s)
         self.node.destroy_node()
+
+
+class LoopActionServer:
+    """An action server's requests (goal, cancel, result) taken by a :class:`ServiceLoop`.
+
+    The server leaves its node's executor: the loop waits on it beside its services
+    and runs rclpy's request handling (``take_data``, then the ``execute`` coroutine,
+    which with synchronous callbacks ends in one step) on its thread.  With the
+    coordinator's goals on the same loop (``graph.build_nodes``), a goal is taken,
+    accepted and started on one thread, with no executor wake-up and no hand-over
+    between threads; its result and cancel requests are answered while it waits for a
+    service (:class:`~suspension_tuning.nodes._service_calls.ServiceCaller`), or
+    between its model runs.
+
+    Parameters
+    ----------
+    owner : rclpy.node.Node
+        The action server's node (for its logger; the server is removed from its
+        waitables).
+    server : rclpy.action.ActionServer
+        The server, with synchronous callbacks.
+    name : str
+        The action's name, for log messages.
+    loop : ServiceLoop
+        The loop to be served by.
+    """
+
+    def __init__(self, owner: Node, server: Any, name: str, loop: ServiceLoop) -> None:
+        self.owner = owner
+        self.service = server  # what the loop waits on (wait_ready takes Waitables)
+        self.service_name = f'action {name}'
+        self.loop = loop
+        owner.remove_waitable(server)
+        loop.add(self)
+
+    def _take_and_answer(self) -> None:
+        """Take what is ready and run rclpy's handling of it (on the loop's thread)."""
+        logger = self.owner.get_logger()
+        try:
+            data = self.service.take_data()
+        except InvalidHandle:  # destroyed under the wait
+            return
+        except Exception as error:  # noqa: BLE001 - e.g. a request that does not convert
+            logger.error(f'{self.service_name}: nothing taken: {error}')
+            return
+        handling = self.service.execute(data)
+        try:
+            handling.send(None)
+        except StopIteration:  # done, in one step
+            return
+        except Exception as error:  # noqa: BLE001 - logged; the loop serves on
+            logger.error(f'{self.service_name} failed: {type(error).__name__}: {error}')
+            return
+        handling.close()
+        logger.error(f'{self.service_name}: a callback awaited something; not served '
+                     'on the loop (its callbacks must be synchronous)')
+
+    def destroy(self, timeout_s: float = 5.0) -> None:
+        """Leave the loop and give the server back to its node (which destroys it)."""
+        self.loop.remove(self, timeout_s)
+        self.owner.add_waitable(self.service)
