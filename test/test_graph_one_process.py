@@ -19,6 +19,7 @@ from rclpy.parameter import Parameter
 pytestmark = pytest.mark.ros
 
 SAMPLES = 12  # fewer than the paper's 30 to keep the test short; same code path
+RESULT_TIMEOUT_S = 1.0  # results kept 1 s after their goal ends (config: 10 s)
 
 
 def _nodes(context, calibration_dir, model_loop: bool):
@@ -29,7 +30,8 @@ def _nodes(context, calibration_dir, model_loop: bool):
     from suspension_tuning.nodes.gradient_evaluator import GradientEvaluatorNode
 
     gradient_params = [Parameter('calibration_dir', value=str(calibration_dir))]
-    coordinator_params = [Parameter('calibration_samples', value=SAMPLES)]
+    coordinator_params = [Parameter('calibration_samples', value=SAMPLES),
+                          Parameter('result_timeout_s', value=RESULT_TIMEOUT_S)]
     if model_loop:
         return build_nodes(workers=1, record=False, context=context, overrides={
             'gradient_evaluator': gradient_params, 'coordinator': coordinator_params})
@@ -203,3 +205,27 @@ def test_a_result_asked_for_after_the_goal_ended_still_comes(one_process_graph):
     assert answer.status == GoalStatus.STATUS_ABORTED
     assert not answer.result.success
     assert "unknown scenario 'bumpy'" in answer.result.message
+
+
+def test_a_result_is_forgotten_result_timeout_after_its_goal_ended(one_process_graph):
+    """rcl expires an ended goal after ``result_timeout_s`` (its timer is waited on by
+    whoever takes the action's requests: the model loop or the executor): a result
+    asked for later is UNKNOWN, and the goal no longer appears in the status."""
+    import time
+
+    from action_msgs.msg import GoalStatus
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning.nodes._service_calls import wait_future
+
+    _, coordinator, client_node, _, _ = one_process_graph
+    handle = _send(client_node, Optimise.Goal(scenario='bumpy', n_vars=2))
+    assert wait_future(handle.get_result_async(), 30.0).status == GoalStatus.STATUS_ABORTED
+    ended = time.monotonic()
+    deadline = ended + 30.0
+    while coordinator.server._goal_handles and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not coordinator.server._goal_handles, 'the ended goal was never expired'
+    assert time.monotonic() - ended >= RESULT_TIMEOUT_S - 0.1  # not before its time
+    late = wait_future(handle.get_result_async(), 30.0)
+    assert late.status == GoalStatus.STATUS_UNKNOWN

@@ -166,6 +166,10 @@ class CoordinatorNode(Node):
         # One more full run at the optimum, publishing its telemetry for the bag; a
         # recording run, not part of the optimisation's run counts.
         self.declare_parameter('final_telemetry', True)
+        # Seconds a goal's result is kept for late result requests after the goal ends
+        # (rcl's default 900 s).  Every status message carries every goal kept, and an
+        # action client converts all of them each time (config/graph.yaml).
+        self.declare_parameter('result_timeout_s', 10.0)
         group = ReentrantCallbackGroup()
         self.timeout_s = float(self.get_parameter('call_timeout_s').value)
         self.goal_loop = goal_loop
@@ -194,6 +198,7 @@ class CoordinatorNode(Node):
             self, Optimise, '~/optimise', execute_callback=self._execute,
             goal_callback=lambda _: GoalResponse.ACCEPT,
             cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=group,
+            result_timeout=float(self.get_parameter('result_timeout_s').value),
             run_goal=self._run_goal)
         # On the goal loop, the loop takes the goal, cancel and result requests too.
         self.served_action = (None if goal_loop is None else LoopActionServer(
