@@ -114,7 +114,8 @@ class GradientEvaluatorNode(Node):
         _logging.info(
             self,
             f'{scenario}/{n_vars} calibrated ({"cache" if response.from_cache else "full runs"}): '
-            + ', '.join(f'{f.name} R2={f.r2:.3f}' for f in scaling.functions))
+            + ', '.join(f'{f.name} R2={f.r2:.3f}' if f.rule == 'eq25' else f'{f.name} {f.rule}'
+                        for f in scaling.functions))
         return response
 
     def _calibrate_remote(self, scenario: str, n_vars: int, x: np.ndarray,
