@@ -71,8 +71,10 @@ def test_ride_optimisation_with_simplified_gradients_converges_through_the_graph
     assert result.n_simplified_runs == local.n_simplified_runs
 
 
-def test_gradient_service_errors_and_calibration_cache(graph):
+def test_gradient_service_errors_and_calibration_cache(graph, monkeypatch):
     from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
+
+    from suspension_tuning.nodes import gradient_evaluator
 
     node = graph['client']
     gradient = node.create_client(EvaluateGradient, '/gradient_evaluator/gradient')
@@ -85,6 +87,12 @@ def test_gradient_service_errors_and_calibration_cache(graph):
                                                         n_samples=SAMPLES)))
     assert first.success and not first.from_cache and first.n_full_runs == SAMPLES
     assert first.function_names[0] == 'f'
+
+    def no_sampling(*args, **kwargs):
+        raise AssertionError('a cached calibration sampled its designs')
+
+    # Served from the cache: the key needs no designs (their maximin LHS takes ~7 ms).
+    monkeypatch.setattr(gradient_evaluator, 'calibration_designs', no_sampling)
     second = wait(calibrate.call_async(Calibrate.Request(scenario='ride', n_vars=2,
                                                          n_samples=SAMPLES)))
     assert second.success and second.from_cache and second.n_full_runs == 0

@@ -92,3 +92,17 @@ def test_scaled_simplified_model_explains_full_model_over_30_samples(scenario):
     assert f.rule == 'eq25'
     assert f.r2 >= 0.9, f'{scenario}: R^2 = {f.r2:.3f}'
     assert f.gradient_factor > 0  # same trend sense in both models
+
+
+def test_calibration_settings_default_to_the_config_and_match_the_designs():
+    from suspension_tuning.optim.simplified_gradient import (
+        calibration_designs,
+        calibration_settings,
+    )
+    from suspension_tuning.vehicle.pitch_plane import load_simplified_config
+
+    cfg = load_simplified_config()['scaling']
+    assert calibration_settings() == (30, int(cfg['seed']))  # [P] 6.3.1: N = 30 samples
+    assert calibration_settings(12, 5) == (12, 5)
+    x, n_samples, seed = calibration_designs(2, 12)
+    assert (n_samples, seed) == calibration_settings(12) and x.shape == (12, 2)

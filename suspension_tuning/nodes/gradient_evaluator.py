@@ -31,6 +31,7 @@ from suspension_tuning.optim.scaling import Scaling, scaling_key
 from suspension_tuning.optim.simplified_gradient import (
     SimplifiedGradient,
     calibration_designs,
+    calibration_settings,
     fit_calibration,
 )
 from suspension_tuning.vehicle.design import VARIABLE_NAMES, validate_design
@@ -81,8 +82,8 @@ class GradientEvaluatorNode(Node):
         start = time.monotonic()
         try:
             scenario, n_vars = self._check(request.scenario, request.n_vars)
-            n_samples = int(request.n_samples or self.get_parameter('default_samples').value)
-            x, n_samples, seed = calibration_designs(n_vars, n_samples)
+            n_samples, seed = calibration_settings(
+                int(request.n_samples or self.get_parameter('default_samples').value))
             key = scaling_key(scenario, n_vars, n_samples, seed)
             path = self._cache_path(key)
             scaling = None
@@ -92,7 +93,8 @@ class GradientEvaluatorNode(Node):
                     response.from_cache = True
                 except ValueError as error:
                     self.get_logger().warning(f'stale calibration {path}: {error}')
-            if scaling is None:
+            if scaling is None:  # the designs are sampled only now (~7 ms)
+                x, _, _ = calibration_designs(n_vars, n_samples, seed)
                 scaling = self._calibrate_remote(scenario, n_vars, x, key)
                 response.n_full_runs = n_samples
                 path.parent.mkdir(parents=True, exist_ok=True)

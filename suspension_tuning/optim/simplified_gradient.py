@@ -73,6 +73,24 @@ def simplified_values(
     return scaling.apply(vals) if scaling is not None else vals
 
 
+def calibration_settings(n_samples: int | None = None, seed: int | None = None
+                         ) -> tuple[int, int]:
+    """Number of samples and LHS seed of the eq. 25 calibration, defaults from config.
+
+    What a calibration's key needs (:func:`~suspension_tuning.optim.scaling.scaling_key`),
+    without sampling the designs (a maximin Latin hypercube: ~7 ms).
+
+    Returns
+    -------
+    (N, seed)
+        ``n_samples`` and ``seed``, or config/simplified_models.yaml ``scaling`` values
+        where None.
+    """
+    cfg = load_simplified_config()['scaling']
+    return (int(cfg['n_samples'] if n_samples is None else n_samples),
+            int(cfg['seed'] if seed is None else seed))
+
+
 def calibration_designs(
     n_vars: int, n_samples: int | None = None, seed: int | None = None
 ) -> tuple[Array, int, int]:
@@ -83,8 +101,7 @@ def calibration_designs(
     (x (N, n_vars), N, seed)
     """
     cfg = load_simplified_config()['scaling']
-    n_samples = int(cfg['n_samples'] if n_samples is None else n_samples)
-    seed = int(cfg['seed'] if seed is None else seed)
+    n_samples, seed = calibration_settings(n_samples, seed)
     x = sample_design_space(
         n_vars, n_samples, seed, bool(cfg['include_corners']), int(cfg['lhs_candidates'])
     )
@@ -171,9 +188,7 @@ def load_or_calibrate(
     (Scaling, bool)
         The scaling and whether it was loaded from the cache.
     """
-    cfg = load_simplified_config()['scaling']
-    n_samples = int(cfg['n_samples'] if n_samples is None else n_samples)
-    seed = int(cfg['seed'] if seed is None else seed)
+    n_samples, seed = calibration_settings(n_samples, seed)
     key = scaling_key(scenario, n_vars, n_samples, seed)
     path = Path(path)
     if path.exists():
