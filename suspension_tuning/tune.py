@@ -6,7 +6,8 @@ Usage::
 
 Prints one line per Dynamic-Q iteration (iteration, f, largest violation, model runs
 so far) from the action's feedback, then the result with the optimum in physical
-units (damper scale factor, gas volume in litres).  Ctrl-C cancels the goal.
+units (damper scale factor, gas volume in litres).  Ctrl-C cancels the goal and exits
+with status 130.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import rclpy
 from rclpy.action import ActionClient
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from suspension_tuning_interfaces.action import Optimise
 
 from suspension_tuning.nodes._service_calls import wait_future
@@ -78,19 +80,37 @@ def wait_result(client: ActionClient, handle, poll_s: float = 1.0) -> Optimise.R
     return future.result().result
 
 
+def cancel(handle) -> int:
+    """Cancel the goal of ``handle`` (if it was accepted) after Ctrl-C; exit status 130."""
+    if handle is None or not handle.accepted:
+        print('interrupted before a goal was running', file=sys.stderr)
+        return 130
+    print('cancelling ...', file=sys.stderr)
+    try:
+        answer = wait_future(handle.cancel_goal_async(), 10.0)
+    except (TimeoutError, KeyboardInterrupt):
+        print('error: the cancel request was not answered', file=sys.stderr)
+        return 130
+    print('goal cancelled' if answer.goals_canceling else 'the goal had ended already',
+          file=sys.stderr)
+    return 130
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``ros2 run suspension_tuning tune``."""
     args_list = sys.argv[1:] if argv is None else argv
     ros_args = rclpy.utilities.remove_ros_args(['tune', *args_list])[1:]
     args = parse_args(ros_args)
-    rclpy.init(args=['tune', *args_list])
+    # Without rclpy's signal handler: it would shut the context down on Ctrl-C, and the
+    # cancel request could no longer be sent.  Ctrl-C raises KeyboardInterrupt here.
+    rclpy.init(args=['tune', *args_list], signal_handler_options=SignalHandlerOptions.NO)
     node = Node('tune')
     client = ActionClient(node, Optimise, args.action)
     executor = MultiThreadedExecutor()
     executor.add_node(node)
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
-    status = 1
+    sending, handle = None, None
     try:
         if not client.wait_for_server(timeout_sec=args.server_timeout):
             print(f'error: no action server {args.action} within {args.server_timeout} s',
@@ -99,31 +119,33 @@ def main(argv: list[str] | None = None) -> int:
         goal = Optimise.Goal(scenario=args.scenario, n_vars=args.n_vars, x0=args.x0,
                              gradient_source=args.gradient,
                              max_iterations=args.max_iterations, move_limit=args.move_limit)
-        handle = wait_future(client.send_goal_async(
+        sending = client.send_goal_async(
             goal, feedback_callback=lambda fb: print(format_feedback(fb.feedback.latest),
-                                                     flush=True)), args.server_timeout)
+                                                     flush=True))
+        handle = wait_future(sending, args.server_timeout)
         if handle is None or not handle.accepted:
             print('error: goal rejected', file=sys.stderr)
             return 2
-        try:
-            result = wait_result(client, handle)
-            if result is None:
-                print(f'error: the action server {args.action} went away before the result',
-                      file=sys.stderr)
-                return 1
-        except KeyboardInterrupt:
-            print('cancelling ...', file=sys.stderr)
-            wait_future(handle.cancel_goal_async(), 10.0)
-            return 130
+        result = wait_result(client, handle)
+        if result is None:
+            print(f'error: the action server {args.action} went away before the result',
+                  file=sys.stderr)
+            return 1
         print(format_result(result), flush=True)
-        status = 0 if result.success else 1
+        return 0 if result.success else 1
+    except KeyboardInterrupt:
+        if handle is None and sending is not None:  # the goal may be accepted still
+            try:
+                handle = wait_future(sending, 5.0)
+            except (TimeoutError, KeyboardInterrupt):
+                pass
+        return cancel(handle)
     finally:
         executor.shutdown(timeout_sec=5.0)
         spinner.join(timeout=5.0)
         client.destroy()
         node.destroy_node()
         rclpy.try_shutdown()
-    return status
 
 
 if __name__ == '__main__':

@@ -69,3 +69,49 @@ def test_tune_says_so_when_the_coordinator_goes_away_before_the_result(ros_conte
             process.kill()
     assert process.returncode == 1
     assert 'the action server /vanishing/optimise went away before the result' in stderr
+
+
+def test_ctrl_c_cancels_the_running_goal_and_exits_130(ros_context, executor):
+    """Ctrl-C while the goal runs: a cancel request reaches the server, and ``tune``
+    exits with 130 (128 + SIGINT, the shell's convention) and no traceback."""
+    import signal
+    import threading
+    import time
+
+    from rclpy.action import ActionServer, CancelResponse
+    from rclpy.callback_groups import ReentrantCallbackGroup
+    from rclpy.node import Node
+    from suspension_tuning_interfaces.action import Optimise
+
+    started, cancelled = threading.Event(), threading.Event()
+
+    def execute(goal_handle):
+        started.set()
+        deadline = time.monotonic() + 60.0
+        while not goal_handle.is_cancel_requested and time.monotonic() < deadline:
+            time.sleep(0.02)
+        if goal_handle.is_cancel_requested:
+            cancelled.set()
+            goal_handle.canceled()
+        else:
+            goal_handle.abort()
+        return Optimise.Result(message='cancelled')
+
+    node = Node('held_coordinator', context=ros_context)
+    ActionServer(node, Optimise, '/held/optimise', execute,
+                 cancel_callback=lambda _: CancelResponse.ACCEPT,
+                 callback_group=ReentrantCallbackGroup())
+    executor.add(node)
+    tune = Path(sys.prefix) / 'bin' / 'tune'
+    process = subprocess.Popen([str(tune), '--action', '/held/optimise'],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert started.wait(60.0), 'the goal never arrived'
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert cancelled.wait(10.0), 'no cancel request reached the server: ' + stderr
+    assert process.returncode == 130, stderr
+    assert 'cancelling' in stderr and 'Traceback' not in stderr
