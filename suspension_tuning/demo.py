@@ -122,6 +122,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f'  bag: {bag}')
             print(f'  plots: {", ".join(str(p) for p in plots)}')
             print(f'  inspect: .venv/bin/inspect_bag {bag}')
+    except KeyboardInterrupt:  # Ctrl-C: the recorder still closes the run's bag below
+        print('\ndemo: interrupted', file=sys.stderr)
+        status = 130
     finally:
         graph.shutdown()
         rclpy.try_shutdown()

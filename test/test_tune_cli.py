@@ -115,3 +115,40 @@ def test_ctrl_c_cancels_the_running_goal_and_exits_130(ros_context, executor):
     assert cancelled.wait(10.0), 'no cancel request reached the server: ' + stderr
     assert process.returncode == 130, stderr
     assert 'cancelling' in stderr and 'Traceback' not in stderr
+
+
+def test_ctrl_c_on_the_graph_mid_goal_stops_it_without_a_traceback(ros_context):
+    """``graph`` interrupted while a goal runs: the goal's calls and status fail as ROS
+    shuts down; the process must still stop at once and quietly, and ``tune`` says the
+    server went away."""
+    import selectors
+    import signal
+    import time
+
+    bindir = Path(sys.prefix) / 'bin'
+    graph = subprocess.Popen([str(bindir / 'graph'), '--no-record'], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    tune = subprocess.Popen([str(bindir / 'tune'), '--scenario', 'handling', '--n-vars', '4',
+                             '--gradient', 'full', '--max-iterations', '30'],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        # Full-model gradients, 2n + 1 = 9 full runs per iteration: the goal still runs
+        # for several iterations after the first feedback line.
+        selector = selectors.DefaultSelector()
+        selector.register(tune.stdout, selectors.EVENT_READ)
+        deadline, line = time.monotonic() + 120.0, ''
+        while 'iteration' not in line and time.monotonic() < deadline:
+            if selector.select(timeout=1.0):
+                line = tune.stdout.readline()
+        assert 'iteration' in line, 'no progress from tune'
+        graph.send_signal(signal.SIGINT)
+        _, graph_err = graph.communicate(timeout=30)
+        tune_out, tune_err = tune.communicate(timeout=60)
+    finally:
+        for process in (graph, tune):
+            if process.poll() is None:
+                process.kill()
+    assert 'Traceback' not in graph_err, graph_err
+    assert graph.returncode == 0, graph_err
+    assert 'optimum in physical units' not in tune_out  # interrupted, not finished
+    assert tune.returncode == 1 and 'went away before the result' in tune_err, tune_err

@@ -237,7 +237,18 @@ class ServiceCaller:
                 # running the model in a burst of hand-overs of about 4 ms (measured
                 # with 0.1 s waits: about 1,000 time slices per 0.7 s batch, and the
                 # batch 50-70 ms slower than with no waiting thread).
-                news = self._take_responses([calls[i][0] for i in pending], 1.0)
+                try:
+                    news = self._take_responses([calls[i][0] for i in pending], 1.0)
+                except _rclpy.RCLError:
+                    if self.node.context.ok():
+                        raise
+                    for i, future in pending.items():  # Ctrl-C or shutdown: no answer
+                        client = calls[i][0]               # can come any more
+                        outcomes[i] = ServiceCallError(
+                            f'service {client.srv_name}: ROS shut down while waiting')
+                        self._answered.discard(client)
+                        client.remove_pending_request(future)
+                    break
                 expired = time.monotonic() > deadline
                 for i, future in list(pending.items()):
                     client = calls[i][0]

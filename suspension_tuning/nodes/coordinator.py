@@ -288,10 +288,26 @@ class CoordinatorNode(Node):
         """Run rclpy's execution coroutine of one goal (on the goal's thread)."""
         task()
         error = task.exception() if task.done() else RuntimeError('goal suspended')
-        if error is not None:
+        if error is not None and self.context.ok():  # after shutdown: nothing to report to
             self.get_logger().error(f'goal execution failed: {type(error).__name__}: {error}')
 
     def _execute(self, goal_handle) -> Optimise.Result:
+        """The action's execute callback: :meth:`_optimise`, quiet when ROS shuts down.
+
+        Ctrl-C on a process holding the graph (``graph``, ``make demo``) shuts the
+        context down under a running goal: its next service call, status or result
+        fails.  The goal then ends with this result, which no client can receive any
+        more, instead of a traceback.
+        """
+        try:
+            return self._optimise(goal_handle)
+        except Exception as error:
+            if self.context.ok():
+                raise
+            return Optimise.Result(success=False, message='stopped: ROS shut down under the '
+                                   f'goal ({type(error).__name__}: {error})')
+
+    def _optimise(self, goal_handle) -> Optimise.Result:
         t0 = time.monotonic()
         try:
             request = self._request(goal_handle.request)
