@@ -104,3 +104,38 @@ def test_coordinator_action_with_full_gradients_equals_in_process(ros_context, e
     bad = wait(client.send_goal_async(Optimise.Goal(scenario='ride', n_vars=5)))
     bad_result = wait(bad.get_result_async()).result
     assert not bad_result.success and 'n_vars' in bad_result.message
+
+
+def test_a_destroyed_coordinator_leaves_no_action_server_behind(ros_context, ros_domain_id):
+    """rclpy's Node.destroy_node leaves action servers alone; a stale ``optimise``
+    server would take the goals of a later ``tune`` and never answer them."""
+    import time
+
+    import rclpy
+    from rclpy.action import get_action_names_and_types
+    from rclpy.context import Context
+
+    from suspension_tuning.nodes.coordinator import CoordinatorNode
+
+    other = Context()
+    rclpy.init(context=other, domain_id=ros_domain_id)
+    watcher = rclpy.create_node('watcher', context=other)
+
+    def seen() -> bool:
+        return any(name == '/coordinator/optimise'
+                   for name, _ in get_action_names_and_types(watcher))
+
+    def wait_until(condition, timeout_s: float = 10.0) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while not condition() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        return condition()
+
+    try:
+        coordinator = CoordinatorNode(context=ros_context)
+        assert wait_until(seen), 'the coordinator never appeared'
+        coordinator.destroy_node()
+        assert wait_until(lambda: not seen()), 'the destroyed coordinator is still seen'
+    finally:
+        watcher.destroy_node()
+        rclpy.try_shutdown(context=other)

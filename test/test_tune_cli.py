@@ -98,9 +98,9 @@ def test_ctrl_c_cancels_the_running_goal_and_exits_130(ros_context, executor):
         return Optimise.Result(message='cancelled')
 
     node = Node('held_coordinator', context=ros_context)
-    ActionServer(node, Optimise, '/held/optimise', execute,
-                 cancel_callback=lambda _: CancelResponse.ACCEPT,
-                 callback_group=ReentrantCallbackGroup())
+    server = ActionServer(node, Optimise, '/held/optimise', execute,
+                          cancel_callback=lambda _: CancelResponse.ACCEPT,
+                          callback_group=ReentrantCallbackGroup())
     executor.add(node)
     tune = Path(sys.prefix) / 'bin' / 'tune'
     process = subprocess.Popen([str(tune), '--action', '/held/optimise'],
@@ -112,6 +112,7 @@ def test_ctrl_c_cancels_the_running_goal_and_exits_130(ros_context, executor):
     finally:
         if process.poll() is None:
             process.kill()
+    server.destroy()
     assert cancelled.wait(10.0), 'no cancel request reached the server: ' + stderr
     assert process.returncode == 130, stderr
     assert 'cancelling' in stderr and 'Traceback' not in stderr
@@ -121,34 +122,39 @@ def test_ctrl_c_on_the_graph_mid_goal_stops_it_without_a_traceback(ros_context):
     """``graph`` interrupted while a goal runs: the goal's calls and status fail as ROS
     shuts down; the process must still stop at once and quietly, and ``tune`` says the
     server went away."""
-    import selectors
     import signal
-    import time
+    import threading
 
     bindir = Path(sys.prefix) / 'bin'
-    graph = subprocess.Popen([str(bindir / 'graph'), '--no-record'], stdout=subprocess.PIPE,
+    graph = subprocess.Popen([str(bindir / 'graph'), '--no-record'], stdout=subprocess.DEVNULL,
                              stderr=subprocess.PIPE, text=True)
+    graph_err: list[str] = []  # drained as it comes: a full pipe would block the graph
+    drain = threading.Thread(target=lambda: graph_err.extend(graph.stderr), daemon=True)
+    drain.start()
     tune = subprocess.Popen([str(bindir / 'tune'), '--scenario', 'handling', '--n-vars', '4',
-                             '--gradient', 'full', '--max-iterations', '30'],
+                             '--gradient', 'full', '--max-iterations', '30',
+                             '--server-timeout', '120'],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         # Full-model gradients, 2n + 1 = 9 full runs per iteration: the goal still runs
         # for several iterations after the first feedback line.
-        selector = selectors.DefaultSelector()
-        selector.register(tune.stdout, selectors.EVENT_READ)
-        deadline, line = time.monotonic() + 120.0, ''
-        while 'iteration' not in line and time.monotonic() < deadline:
-            if selector.select(timeout=1.0):
-                line = tune.stdout.readline()
-        assert 'iteration' in line, 'no progress from tune'
+        out = []
+        for line in tune.stdout:  # ends when tune exits
+            out.append(line)
+            if 'iteration' in line:
+                break
+        assert out and 'iteration' in out[-1], (
+            'no progress from tune: ' + ''.join(out) + tune.stderr.read() + ''.join(graph_err))
         graph.send_signal(signal.SIGINT)
-        _, graph_err = graph.communicate(timeout=30)
+        graph.wait(timeout=30)
+        drain.join(timeout=10)
         tune_out, tune_err = tune.communicate(timeout=60)
     finally:
         for process in (graph, tune):
             if process.poll() is None:
                 process.kill()
-    assert 'Traceback' not in graph_err, graph_err
-    assert graph.returncode == 0, graph_err
+    graph_text = ''.join(graph_err)
+    assert 'Traceback' not in graph_text, graph_text
+    assert graph.returncode == 0, graph_text
     assert 'optimum in physical units' not in tune_out  # interrupted, not finished
     assert tune.returncode == 1 and 'went away before the result' in tune_err, tune_err

@@ -362,7 +362,12 @@ class CoordinatorNode(Node):
         return message
 
     def destroy_node(self) -> None:
-        """Destroy the private client node too, after running goals end (10 s at most)."""
+        """Destroy the action server and the private clients too, after goals end (10 s).
+
+        rclpy's ``Node.destroy_node`` leaves action servers alone: the server's handles
+        keep the node's DDS participant alive, and other processes go on seeing an
+        ``optimise`` action that never answers.
+        """
         for goal in self.goals:
             if not goal.done():
                 try:
@@ -372,6 +377,7 @@ class CoordinatorNode(Node):
         self.goal_threads.shutdown(wait=False, cancel_futures=True)
         if self.served_action is not None:
             self.served_action.destroy()
+        self.server.destroy()
         self.caller.destroy()
         super().destroy_node()
 
