@@ -229,3 +229,31 @@ def test_a_result_is_forgotten_result_timeout_after_its_goal_ended(one_process_g
     assert time.monotonic() - ended >= RESULT_TIMEOUT_S - 0.1  # not before its time
     late = wait_future(handle.get_result_async(), 30.0)
     assert late.status == GoalStatus.STATUS_UNKNOWN
+
+
+@pytest.mark.parametrize('one_process_graph', ['model_loop'], indirect=True)
+def test_a_goal_cancelled_while_queued_behind_another_never_runs(one_process_graph):
+    """Goals on the model loop run one after another; one cancelled while it waits
+    ends at its start, without a model run, and the running goal is not disturbed."""
+    from action_msgs.msg import GoalStatus
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning.nodes._service_calls import wait_future
+
+    _, _, client_node, goal_threads, _ = one_process_graph
+    first = threading.Event()
+    # Full-model gradients (5 full runs per iteration): the first goal still runs
+    # for about a second after its first feedback.
+    goal = Optimise.Goal(scenario='ride', n_vars=2, gradient_source='full', max_iterations=20)
+    running = _send(client_node, goal, lambda _: first.set())
+    assert first.wait(120.0), 'no feedback'
+    queued = _send(client_node, goal)  # accepted while the first goal waits for a service
+    cancel = wait_future(queued.cancel_goal_async(), 30.0)
+    assert len(cancel.goals_canceling) == 1
+    late = wait_future(queued.get_result_async(), 300.0)
+    done = wait_future(running.get_result_async(), 300.0)
+    assert done.status == GoalStatus.STATUS_SUCCEEDED and done.result.success
+    assert late.status == GoalStatus.STATUS_CANCELED
+    assert late.result.message == 'cancelled before it started'
+    assert late.result.n_full_runs == 0 and len(late.result.history) == 0
+    assert len(goal_threads) == 2  # both went through the execute callback, in order

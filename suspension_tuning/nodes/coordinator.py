@@ -314,6 +314,9 @@ class CoordinatorNode(Node):
         except ValueError as error:
             goal_handle.abort()
             return Optimise.Result(success=False, message=f'bad goal: {error}')
+        if goal_handle.is_cancel_requested:  # cancelled while it waited for an earlier goal
+            goal_handle.canceled()
+            return Optimise.Result(success=False, message='cancelled before it started')
         _logging.info(self, f'optimising {request.scenario} with {request.n_vars} '
                             f'variables, {request.gradient_source} gradients')
         self._publish_run_config(request)
