@@ -357,6 +357,10 @@ class LoopActionServer:
                      'on the loop (its callbacks must be synchronous)')
 
     def destroy(self, timeout_s: float = 5.0) -> None:
-        """Leave the loop and give the server back to its node (which destroys it)."""
+        """Leave the loop and give the server back to its node.
+
+        Back among the node's waitables, so that ``ActionServer.destroy`` (which removes
+        it from there) can run afterwards.
+        """
         self.loop.remove(self, timeout_s)
         self.owner.add_waitable(self.service)
