@@ -47,7 +47,6 @@ def test_ride_optimisation_with_simplified_gradients_converges_through_the_graph
     from rclpy.action import ActionClient
     from suspension_tuning_interfaces.action import Optimise
 
-
     client = ActionClient(graph['client'], Optimise, '/coordinator/optimise')
     assert client.wait_for_server(timeout_sec=10.0)
     feedback = []

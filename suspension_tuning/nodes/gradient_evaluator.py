@@ -174,7 +174,6 @@ class GradientEvaluatorNode(Node):
             raise ValueError(f'n_vars must be 2 or 4, got {n_vars}')
         return scenario, int(n_vars)
 
-
     def destroy_node(self) -> None:
         """Destroy the service threads and the private client node too."""
         for service in self.service_threads:
