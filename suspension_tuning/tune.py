@@ -122,7 +122,12 @@ def main(argv: list[str] | None = None) -> int:
         sending = client.send_goal_async(
             goal, feedback_callback=lambda fb: print(format_feedback(fb.feedback.latest),
                                                      flush=True))
-        handle = wait_future(sending, args.server_timeout)
+        try:
+            handle = wait_future(sending, args.server_timeout)
+        except TimeoutError:
+            print(f'error: the goal was not answered within {args.server_timeout} s (a '
+                  f'stale server of {args.action} on this ROS domain?)', file=sys.stderr)
+            return 1
         if handle is None or not handle.accepted:
             print('error: goal rejected', file=sys.stderr)
             return 2

@@ -50,7 +50,7 @@ def recorder(ros_context, tmp_path, **params):
 
 
 def test_records_topics_service_events_and_action_feedback_and_status(
-    ros_context, executor, tmp_path
+    ros_context, executor, tmp_path, request
 ):
     from rclpy.action import ActionClient, ActionServer
     from rclpy.callback_groups import ReentrantCallbackGroup
@@ -96,8 +96,13 @@ def test_records_topics_service_events_and_action_feedback_and_status(
         goal_handle.succeed()
         return Optimise.Result(success=True, iterations=3)
 
-    ActionServer(graph, Optimise, '/coordinator/optimise', execute, callback_group=group)
+    server = ActionServer(graph, Optimise, '/coordinator/optimise', execute,
+                          callback_group=group)
     action_client = ActionClient(graph, Optimise, '/coordinator/optimise', callback_group=group)
+    # Node.destroy_node leaves action servers and clients alone: left alive, this fake
+    # /coordinator/optimise would take the goals of later tests' tune runs unanswered.
+    request.addfinalizer(server.destroy)
+    request.addfinalizer(action_client.destroy)
     executor.add(node, graph)
     expected = {
         '/optimisation/progress',

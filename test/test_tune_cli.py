@@ -158,3 +158,24 @@ def test_ctrl_c_on_the_graph_mid_goal_stops_it_without_a_traceback(ros_context):
     assert graph.returncode == 0, graph_text
     assert 'optimum in physical units' not in tune_out  # interrupted, not finished
     assert tune.returncode == 1 and 'went away before the result' in tune_err, tune_err
+
+
+def test_a_server_that_never_answers_the_goal_is_an_error_not_a_hang(ros_context):
+    """A server seen on the graph but not served (here: its node never spun; in the
+    wild, a stale process) leaves the goal unanswered: tune says so and exits 1."""
+    from rclpy.action import ActionServer
+    from rclpy.node import Node
+    from suspension_tuning_interfaces.action import Optimise
+
+    node = Node('silent_coordinator', context=ros_context)
+    server = ActionServer(node, Optimise, '/silent/optimise', lambda handle: Optimise.Result())
+    try:
+        run = subprocess.run([str(Path(sys.prefix) / 'bin' / 'tune'), '--action',
+                              '/silent/optimise', '--server-timeout', '3'],
+                             capture_output=True, text=True, timeout=120)
+    finally:
+        server.destroy()
+        node.destroy_node()
+    assert run.returncode == 1, run.stderr
+    assert 'the goal was not answered within 3.0 s' in run.stderr
+    assert 'Traceback' not in run.stderr
