@@ -37,12 +37,25 @@ def test_tune_without_a_coordinator_says_so(ros_context):
     assert 'no action server /nobody/optimise' in run.stderr
 
 
+def _serve_and_tune(ros_context, executor, action: str, execute, **server_options):
+    """(server, tune process): a test Optimise server at ``action`` spun by ``executor``,
+    and ``tune --action action`` started against it."""
+    from rclpy.action import ActionServer
+    from rclpy.node import Node
+    from suspension_tuning_interfaces.action import Optimise
+
+    node = Node(action.strip('/').split('/')[0] + '_coordinator', context=ros_context)
+    server = ActionServer(node, Optimise, action, execute, **server_options)
+    executor.add(node)
+    process = subprocess.Popen([str(Path(sys.prefix) / 'bin' / 'tune'), '--action', action],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return server, process
+
+
 def test_tune_says_so_when_the_coordinator_goes_away_before_the_result(ros_context, executor):
     """A server that vanishes mid-goal: an error on stderr and exit status 1, no hang."""
     import threading
 
-    from rclpy.action import ActionServer
-    from rclpy.node import Node
     from suspension_tuning_interfaces.action import Optimise
 
     started, release = threading.Event(), threading.Event()
@@ -53,12 +66,7 @@ def test_tune_says_so_when_the_coordinator_goes_away_before_the_result(ros_conte
         goal_handle.abort()
         return Optimise.Result()
 
-    node = Node('vanishing_coordinator', context=ros_context)
-    server = ActionServer(node, Optimise, '/vanishing/optimise', execute)
-    executor.add(node)
-    tune = Path(sys.prefix) / 'bin' / 'tune'
-    process = subprocess.Popen([str(tune), '--action', '/vanishing/optimise'],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    server, process = _serve_and_tune(ros_context, executor, '/vanishing/optimise', execute)
     try:
         assert started.wait(60.0), 'the goal never arrived'
         server.destroy()  # the action server leaves the graph mid-goal
@@ -78,9 +86,8 @@ def test_ctrl_c_cancels_the_running_goal_and_exits_130(ros_context, executor):
     import threading
     import time
 
-    from rclpy.action import ActionServer, CancelResponse
+    from rclpy.action import CancelResponse
     from rclpy.callback_groups import ReentrantCallbackGroup
-    from rclpy.node import Node
     from suspension_tuning_interfaces.action import Optimise
 
     started, cancelled = threading.Event(), threading.Event()
@@ -97,14 +104,9 @@ def test_ctrl_c_cancels_the_running_goal_and_exits_130(ros_context, executor):
             goal_handle.abort()
         return Optimise.Result(message='cancelled')
 
-    node = Node('held_coordinator', context=ros_context)
-    server = ActionServer(node, Optimise, '/held/optimise', execute,
-                          cancel_callback=lambda _: CancelResponse.ACCEPT,
-                          callback_group=ReentrantCallbackGroup())
-    executor.add(node)
-    tune = Path(sys.prefix) / 'bin' / 'tune'
-    process = subprocess.Popen([str(tune), '--action', '/held/optimise'],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    server, process = _serve_and_tune(ros_context, executor, '/held/optimise', execute,
+                                      cancel_callback=lambda _: CancelResponse.ACCEPT,
+                                      callback_group=ReentrantCallbackGroup())
     try:
         assert started.wait(60.0), 'the goal never arrived'
         process.send_signal(signal.SIGINT)
