@@ -239,16 +239,11 @@ class ServiceCaller:
                 # batch 50-70 ms slower than with no waiting thread).
                 try:
                     news = self._take_responses([calls[i][0] for i in pending], 1.0)
+                    shut_down = False
                 except _rclpy.RCLError:
                     if self.node.context.ok():
                         raise
-                    for i, future in pending.items():  # Ctrl-C or shutdown: no answer
-                        client = calls[i][0]               # can come any more
-                        outcomes[i] = ServiceCallError(
-                            f'service {client.srv_name}: ROS shut down while waiting')
-                        self._answered.discard(client)
-                        client.remove_pending_request(future)
-                    break
+                    news, shut_down = False, True  # Ctrl-C or shutdown: no answer can come
                 expired = time.monotonic() > deadline
                 for i, future in list(pending.items()):
                     client = calls[i][0]
@@ -257,6 +252,9 @@ class ServiceCaller:
                         outcomes[i] = (ServiceCallError(f'service {client.srv_name} failed: '
                                                         f'{error}') if error is not None
                                        else future.result())
+                    elif shut_down:
+                        outcomes[i] = ServiceCallError(f'service {client.srv_name}: ROS shut '
+                                                       'down while waiting')
                     elif expired:
                         outcomes[i] = ServiceCallError(f'service {client.srv_name}: no '
                                                        f'response within {timeout_s} s')
