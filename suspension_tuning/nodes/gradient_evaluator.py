@@ -135,8 +135,7 @@ class GradientEvaluatorNode(Node):
         inputs = [simplified_inputs.unpack(scenario, message, x[i])
                   for i, message in enumerate(answer.inputs)] or None
         self.simplified_runs += len(x)
-        return fit_calibration(scenario, n_vars, x, full_f, full_g, inputs, len(x),
-                               key['seed'], key)
+        return fit_calibration(scenario, n_vars, x, full_f, full_g, inputs, key)
 
     # ----------------------------------------------------------------- gradient
     def _on_gradient(self, request: EvaluateGradient.Request,

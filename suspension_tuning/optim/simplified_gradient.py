@@ -115,16 +115,14 @@ def fit_calibration(
     full_f: ArrayLike,
     full_g: ArrayLike,
     inputs: list[SimplifiedInputs] | None,
-    n_samples: int,
-    seed: int,
-    key: dict[str, Any] | None = None,
+    key: dict[str, Any],
 ) -> Scaling:
     """Eq. 25 fit from full-model values at the calibration designs.
 
     The simplified model runs at the same designs; for handling each sample uses the
     inputs captured from its own full run (``inputs[i]``), as at an iterate.  ``key``
-    is the calibration's :func:`~suspension_tuning.optim.scaling.scaling_key` when the
-    caller has it already (it hashes the model configuration files).
+    is the calibration's :func:`~suspension_tuning.optim.scaling.scaling_key`, kept
+    with the scaling (the caller has it already: it names the cache file).
     """
     full = np.column_stack([np.asarray(full_f, dtype=float), np.asarray(full_g, dtype=float)])
     if scenario == 'ride':
@@ -135,8 +133,6 @@ def fit_calibration(
         simp = np.vstack(
             [simplified_values(scenario, x[i], n_vars, inputs[i]) for i in range(len(x))]
         )
-    if key is None:
-        key = scaling_key(scenario, n_vars, n_samples, seed)
     return fit_scaling(x, full, simp, key=key)
 
 
@@ -171,7 +167,8 @@ def calibrate(
         from suspension_tuning.vehicle.scenarios import run_scenario as run_full
     res = run_full(scenario, x)
     inputs = [SimplifiedInputs.from_scenario_result(res, i) for i in range(n_samples)]
-    return fit_calibration(scenario, n_vars, x, res.f, res.g, inputs, n_samples, seed)
+    return fit_calibration(scenario, n_vars, x, res.f, res.g, inputs,
+                           scaling_key(scenario, n_vars, n_samples, seed))
 
 
 def load_or_calibrate(
