@@ -193,7 +193,8 @@ class CoordinatorNode(Node):
                                                 LATCHED)
         # Dumped once: the configuration a run records does not change while the node runs.
         self.static_config_yaml = configuration_yaml()
-        self._config_yaml: dict[str, str] = {}  # the last run configuration's YAML
+        # (JSON form, YAML text) of the last run configuration published.
+        self._config_yaml: tuple[str, str] = ('', '')
         self.server = GoalThreadActionServer(
             self, Optimise, '~/optimise', execute_callback=self._execute,
             goal_callback=lambda _: GoalResponse.ACCEPT,
@@ -240,10 +241,9 @@ class CoordinatorNode(Node):
         # of a configuration is kept, keyed by its JSON form.  The start time is the
         # one line that always changes (a float's YAML form is its repr, as PyYAML's).
         key = json.dumps(config, default=repr)
-        text = self._config_yaml.get(key)
-        if text is None:
-            text = dump_yaml(config)
-            self._config_yaml = {key: text}
+        if self._config_yaml[0] != key:
+            self._config_yaml = (key, dump_yaml(config))
+        text = self._config_yaml[1]
         stamp = f'started_unix_s: {time.time()!r}\n'
         self.config_pub.publish(String(data=text + stamp + self.static_config_yaml))
 
