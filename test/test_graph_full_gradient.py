@@ -121,8 +121,10 @@ def test_a_destroyed_coordinator_leaves_no_action_server_behind(ros_context, ros
     rclpy.init(context=other, domain_id=ros_domain_id)
     watcher = rclpy.create_node('watcher', context=other)
 
+    # A namespace of its own: a coordinator left by another test or process on this
+    # domain must not count.
     def seen() -> bool:
-        return any(name == '/coordinator/optimise'
+        return any(name == '/destroy_test/coordinator/optimise'
                    for name, _ in get_action_names_and_types(watcher))
 
     def wait_until(condition, timeout_s: float = 10.0) -> bool:
@@ -132,7 +134,7 @@ def test_a_destroyed_coordinator_leaves_no_action_server_behind(ros_context, ros
         return condition()
 
     try:
-        coordinator = CoordinatorNode(context=ros_context)
+        coordinator = CoordinatorNode(context=ros_context, namespace='/destroy_test')
         assert wait_until(seen), 'the coordinator never appeared'
         coordinator.destroy_node()
         assert wait_until(lambda: not seen()), 'the destroyed coordinator is still seen'
