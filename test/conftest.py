@@ -153,3 +153,18 @@ def in_process_optimum():
         return optimise(TuningRequest(scenario, 2, None, 'simplified', options), full_model,
                         SimplifiedGradient(scenario, 2, scaling))
     return run
+
+
+@pytest.fixture
+def foxglove_check():
+    """``check(bags, messages=False)``: decode bags with Foxglove's own npm libraries.
+
+    Skips the test, saying why, where node or the packages ``make setup`` installs into
+    tools/foxglove/node_modules are missing (see suspension_tuning/bag/foxglove.py).
+    """
+    from suspension_tuning.bag import foxglove
+
+    reason = foxglove.unavailable_reason()
+    if reason:
+        pytest.skip(f'Foxglove decoding check not run: {reason}')
+    return foxglove.check
