@@ -32,6 +32,8 @@ from suspension_tuning.bag.reader import mcap_file
 #: Folder of the node script and its package.json / package-lock.json.
 TOOL_DIR = Path(__file__).resolve().parents[2] / 'tools' / 'foxglove'
 SCRIPT = TOOL_DIR / 'check_bag.mjs'
+#: Oldest node major version the packages support (their package.json "engines").
+NODE_MAJOR = 20
 #: Packages the script imports (installed by ``make setup``).
 PACKAGES = (
     '@mcap/core',
@@ -44,8 +46,17 @@ PACKAGES = (
 
 def unavailable_reason() -> str:
     """Why the check cannot run here ('' when it can)."""
-    if shutil.which('node') is None:
-        return 'node is not installed (Foxglove decoding check needs node >= 18)'
+    node = shutil.which('node')
+    if node is None:
+        return f'node is not installed (the Foxglove decoding check needs node >= {NODE_MAJOR})'
+    try:
+        version = subprocess.run([node, '--version'], capture_output=True, text=True,
+                                 timeout=30, check=True).stdout.strip()
+        major = int(version.lstrip('v').split('.')[0])
+    except (OSError, subprocess.SubprocessError, ValueError):
+        return f'{node} --version does not answer'
+    if major < NODE_MAJOR:
+        return f'node {version} is too old (@foxglove/rosmsg2-serialization needs >= {NODE_MAJOR})'
     if not SCRIPT.is_file():
         return f'{SCRIPT} is missing'
     missing = [p for p in PACKAGES if not (TOOL_DIR / 'node_modules' / p).is_dir()]
