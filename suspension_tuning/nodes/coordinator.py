@@ -18,7 +18,6 @@ that the recorder puts one run in one bag.  The loop itself is
 from __future__ import annotations
 
 import collections
-import json
 import subprocess
 import threading
 import time
@@ -134,10 +133,8 @@ class CoordinatorNode(Node):
         self.config_pub = self.create_publisher(String, '/optimisation/run_config', LATCHED)
         self.result_pub = self.create_publisher(Optimise.Result, '/optimisation/result',
                                                 LATCHED)
-        # Dumped once: the configuration a run records does not change while the node runs.
+        # Dumped once (29 ms): the configuration files do not change while the node runs.
         self.static_config_yaml = configuration_yaml()
-        # (JSON form, YAML text) of the last run configuration published.
-        self._config_yaml: tuple[str, str] = ('', '')
         self._queue: collections.deque = collections.deque()
         self._running: Any = None  # the goal handle executing, if any
         self._idle = threading.Condition()
@@ -185,16 +182,8 @@ class CoordinatorNode(Node):
             'coordinator_parameters': {name: p.value for name, p in
                                        self.get_parameters_by_prefix('').items()},
         }
-        # Goals of one node mostly repeat their configuration, and the YAML emitter
-        # (libyaml's, through PyYAML's representers) takes ~0.25 ms even warm: the text
-        # of a configuration is kept, keyed by its JSON form.  The start time is the
-        # one line that always changes (a float's YAML form is its repr, as PyYAML's).
-        key = json.dumps(config, default=repr)
-        if self._config_yaml[0] != key:
-            self._config_yaml = (key, dump_yaml(config))
-        text = self._config_yaml[1]
         stamp = f'started_unix_s: {time.time()!r}\n'
-        self.config_pub.publish(String(data=text + stamp + self.static_config_yaml))
+        self.config_pub.publish(String(data=dump_yaml(config) + stamp + self.static_config_yaml))
 
     def _full_model(self, request: TuningRequest):
         def evaluate(designs: np.ndarray) -> FullEvaluation:
