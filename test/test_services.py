@@ -25,6 +25,18 @@ def _request(*designs: float) -> EvaluateDesign.Request:
     return EvaluateDesign.Request(scenario='ride', n_vars=2, designs=list(designs))
 
 
+def _unspun_server_and_caller(context, executor, name: str):
+    """(server node, caller node, client): ``/<name>/evaluate`` on a node no executor
+    spins (it takes no request), and a caller spun by ``executor``."""
+    server = rclpy.create_node(name, context=context)
+    serve(server, EvaluateDesign, '~/evaluate', _echo, MutuallyExclusiveCallbackGroup())
+    caller = rclpy.create_node('caller', context=context)
+    client = caller.create_client(EvaluateDesign, f'/{name}/evaluate',
+                                  callback_group=ReentrantCallbackGroup())
+    executor.add(caller)
+    return server, caller, client
+
+
 def test_a_callback_that_raises_is_answered_with_the_error_and_serving_goes_on(
         ros_context, executor):
     server = rclpy.create_node('owner', namespace='/ns', context=ros_context)
@@ -43,15 +55,10 @@ def test_a_callback_that_raises_is_answered_with_the_error_and_serving_goes_on(
 
 def test_a_server_that_goes_away_mid_call_is_reported_vanished_not_waited_for(
         ros_context, executor):
-    """A server node that no executor spins takes no request; it goes away 0.5 s
-    into the call, which must say so after a poll without news (1 s), not wait for
-    its 60 s timeout (the message tells which)."""
-    server = rclpy.create_node('leaving', context=ros_context)
-    serve(server, EvaluateDesign, '~/evaluate', _echo, MutuallyExclusiveCallbackGroup())
-    caller = rclpy.create_node('caller', context=ros_context)
-    client = caller.create_client(EvaluateDesign, '/leaving/evaluate',
-                                  callback_group=ReentrantCallbackGroup())
-    executor.add(caller)
+    """The server takes no request and goes away 0.5 s into the call, which must say
+    so after a poll without news (1 s), not wait for its 60 s timeout (the message
+    tells which)."""
+    server, caller, client = _unspun_server_and_caller(ros_context, executor, 'leaving')
     assert client.wait_for_service(timeout_sec=10.0)
     leave = threading.Timer(0.5, server.destroy_node)
     leave.start()
@@ -65,13 +72,8 @@ def test_a_server_that_goes_away_mid_call_is_reported_vanished_not_waited_for(
 
 
 def test_a_wait_ends_when_the_caller_says_it_is_stopping(ros_context, executor):
-    """A server that never answers (its node is not spun); the caller's node shuts down."""
-    server = rclpy.create_node('silent', context=ros_context)
-    serve(server, EvaluateDesign, '~/evaluate', _echo, MutuallyExclusiveCallbackGroup())
-    caller = rclpy.create_node('caller', context=ros_context)
-    client = caller.create_client(EvaluateDesign, '/silent/evaluate',
-                                  callback_group=ReentrantCallbackGroup())
-    executor.add(caller)
+    """A server that never answers; the caller's node shuts down."""
+    server, caller, client = _unspun_server_and_caller(ros_context, executor, 'silent')
     try:
         with pytest.raises(ServiceCallError, match='shut down while waiting'):
             call(caller, client, _request(0.5, 0.5), 60.0, stopping=lambda: True)

@@ -252,7 +252,7 @@ class CoordinatorNode(Node):
             goal_handle.canceled()
             return Optimise.Result(success=False, message='cancelled before it started')
         self.get_logger().info(f'optimising {request.scenario} with {request.n_vars} '
-                            f'variables, {request.gradient_source} gradients')
+                               f'variables, {request.gradient_source} gradients')
         self._publish_run_config(request)
         counter = RunCounter()
         history_msgs: list[IterationRecord] = []
