@@ -208,3 +208,30 @@ def test_a_goal_cancelled_while_queued_behind_another_never_runs(one_process_gra
     assert late.result.message == 'cancelled before it started'
     assert late.result.n_full_runs == 0 and len(late.result.history) == 0
     assert len(goal_threads) == 2  # both went through the execute callback, in order
+
+
+def test_a_node_of_ones_own_takes_the_place_of_the_graphs(ros_context):
+    """``build_nodes(factories=...)``: the graph's parameters and overrides reach it."""
+    from rclpy.node import Node
+
+    from suspension_tuning.graph import build_nodes
+    from suspension_tuning.nodes.valve_controller import ValveControllerNode
+
+    class OwnController(Node):
+        def __init__(self, **kwargs):
+            super().__init__('valve_controller', **kwargs)
+            self.declare_parameter('gain', 0.0)
+
+    nodes = build_nodes(record=False, context=ros_context,
+                        overrides={'valve_controller': [Parameter('gain', value=2.5)]},
+                        factories={'valve_controller': OwnController})
+    try:
+        [own] = [node for node in nodes if node.get_name() == 'valve_controller']
+        assert isinstance(own, OwnController)
+        assert not any(isinstance(node, ValveControllerNode) for node in nodes)
+        assert own.get_parameter('gain').value == 2.5
+        assert [node.get_name() for node in nodes] == [
+            'full_vehicle_sim', 'gradient_evaluator', 'valve_controller', 'coordinator']
+    finally:
+        for node in nodes:
+            node.destroy_node()
