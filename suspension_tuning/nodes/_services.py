@@ -44,7 +44,7 @@ def serve(node: Node, srv_type: Any, name: str, callback: Callable[[Any, Any], A
             return callback(request, response)
         except Exception as error:  # noqa: BLE001 - answer, log, and serve on
             message = f'{type(error).__name__}: {error}'
-            node.get_logger().error(f'{name} failed: {message}')
+            node.get_logger().error(f'{service.service_name} failed: {message}')
             response = srv_type.Response()
             if hasattr(response, 'success') and hasattr(response, 'error'):
                 response.success, response.error = False, message
