@@ -45,6 +45,11 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
         MyController}``), called with ``context`` and ``parameter_overrides``
         keywords.  Its class attribute ``EXECUTOR`` names the executor it needs
         (default single-threaded, ``nodes._spin.executor_for``).
+
+    Raises
+    ------
+    ValueError
+        No worker, or a factory for a node the graph does not have.
     """
     from suspension_tuning.nodes.coordinator import CoordinatorNode
     from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
@@ -54,13 +59,17 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
     if workers < 1:
         raise ValueError(f'need at least one simulation worker, got {workers}')
     names = ['full_vehicle_sim'] if workers == 1 else [f'sim_{i}' for i in range(workers)]
-    made = {**{name: functools.partial(FullVehicleSimNode, name) for name in names},
-            'gradient_evaluator': GradientEvaluatorNode,
-            'valve_controller': ValveControllerNode, 'coordinator': CoordinatorNode}
+    makers = {**{name: functools.partial(FullVehicleSimNode, name) for name in names},
+              'gradient_evaluator': GradientEvaluatorNode,
+              'valve_controller': ValveControllerNode, 'coordinator': CoordinatorNode}
     if record:
         from suspension_tuning.nodes.recorder import RecorderNode
-        made['recorder'] = RecorderNode
-    made.update(factories or {})
+        makers['recorder'] = RecorderNode
+    unknown = sorted(set(factories or {}) - set(makers))
+    if unknown:
+        raise ValueError(f'no node {", ".join(unknown)} in the graph to replace; its nodes: '
+                         + ', '.join(makers))
+    makers.update(factories or {})
     graph_set = {'gradient_evaluator': [Parameter('sim_service',
                                                   value=f'/{names[0]}/evaluate')],
                  'coordinator': [Parameter('sim_workers',
@@ -68,7 +77,7 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
     overrides = overrides or {}
     return [make(context=context,
                  parameter_overrides=[*graph_set.get(name, []), *overrides.get(name, [])])
-            for name, make in made.items()]
+            for name, make in makers.items()]
 
 
 class SpinningGraph:

@@ -211,7 +211,8 @@ def test_a_goal_cancelled_while_queued_behind_another_never_runs(one_process_gra
 
 
 def test_a_node_of_ones_own_takes_the_place_of_the_graphs(ros_context):
-    """``build_nodes(factories=...)``: the graph's parameters and overrides reach it."""
+    """``build_nodes(factories=...)``: the graph's parameters and overrides reach it;
+    a factory for a node the graph does not have is an error."""
     from rclpy.node import Node
 
     from suspension_tuning.graph import build_nodes
@@ -235,3 +236,6 @@ def test_a_node_of_ones_own_takes_the_place_of_the_graphs(ros_context):
     finally:
         for node in nodes:
             node.destroy_node()
+    with pytest.raises(ValueError, match='no node valve_controler in the graph'):
+        build_nodes(record=False, context=ros_context,
+                    factories={'valve_controler': OwnController})  # misspelt: not added
