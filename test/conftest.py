@@ -97,13 +97,14 @@ class SpinningExecutor:
 
         self.executor = MultiThreadedExecutor(num_threads=num_threads, context=context)
         self.nodes: list = []
+        self.stopped = False
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
 
     def _spin(self) -> None:
         from suspension_tuning.nodes._spin import spin_until_shutdown
 
-        spin_until_shutdown(self.executor)  # ends quietly when shut down
+        spin_until_shutdown(self.executor, stopped=lambda: self.stopped)  # ends quietly
 
     def add(self, *nodes: object) -> None:
         """Add nodes; they are destroyed when the executor shuts down."""
@@ -113,6 +114,7 @@ class SpinningExecutor:
 
     def shutdown(self) -> None:
         """Stop spinning, join the thread and destroy the nodes."""
+        self.stopped = True
         self.executor.shutdown(timeout_sec=5.0)
         self._thread.join(timeout=10.0)
         for node in self.nodes:
