@@ -461,3 +461,36 @@ class FmuModel:
     def __exit__(self, *exc) -> None:
         """Close the model."""
         self.close()
+
+
+MODELS = ('builtin', 'fmu')
+
+
+def worker_model(model: str, fmu_path: str = '', fmu_mapping: str = '') -> FmuModel | None:
+    """The full model a simulation worker runs: None (built-in) or an FmuModel.
+
+    The three settings must agree, so that a worker never starts half-configured.
+
+    Raises
+    ------
+    FmuConfigError
+        An unknown model, 'fmu' without fmu_path or fmu_mapping, 'builtin' with either
+        set, or an FMU and mapping that do not fit (see :class:`FmuModel`).
+    MappingError
+        A bad mapping file.
+    """
+    if model not in MODELS:
+        raise FmuConfigError(f'model must be one of {", ".join(MODELS)}, got {model!r}')
+    if model == 'builtin':
+        given = [name for name, value in (('fmu_path', fmu_path), ('fmu_mapping', fmu_mapping))
+                 if value]
+        if given:
+            raise FmuConfigError(f'{" and ".join(given)} set but model is builtin: add '
+                                 '-p model:=fmu to run the FMU, or drop them')
+        return None
+    missing = [name for name, value in (('fmu_path', fmu_path), ('fmu_mapping', fmu_mapping))
+               if not value]
+    if missing:
+        raise FmuConfigError(f'model fmu needs {" and ".join(missing)} (-p fmu_path:=<file.fmu> '
+                             '-p fmu_mapping:=<mapping.yaml>, docs/fmu.md)')
+    return FmuModel(fmu_path, fmu_mapping)
