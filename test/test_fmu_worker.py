@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import yaml
 from rclpy.parameter import Parameter
-from test_fmu import failing_mapping, ride_inputs_mapping
+from test_fmu import DEFENDER_RTOL, defender_mapping, failing_mapping, ride_inputs_mapping
 from test_graph_simplified import wait
 
 pytestmark = pytest.mark.ros
@@ -94,6 +94,50 @@ def test_fmu_worker_answers_a_failing_design_with_an_error_and_keeps_serving(
     assert ok.success, ok.error
     assert ok.n_designs == 1 and len(ok.g) == 4
     assert ok.metric_names[:2] == ['a_rms_driver_mps2', 'a_rms_passenger_mps2']
+
+
+def test_fmu_worker_wrapping_our_full_model_answers_like_the_builtin_worker(
+        ros_context, executor, fmus, tmp_path):
+    """A handling request with the simplified model's inputs, to a built-in worker and
+    to a worker running the product's full model as an FMU: the same f, g, metrics and
+    steering and slip-angle histories, within DEFENDER_RTOL (test_fmu.py)."""
+    from rclpy.node import Node
+    from suspension_tuning_interfaces.srv import EvaluateDesign
+
+    from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
+
+    builtin = FullVehicleSimNode('builtin_sim', context=ros_context)
+    fmu = FullVehicleSimNode('fmu_sim', context=ros_context, parameter_overrides=fmu_parameters(
+        fmus['defender'], write_mapping(tmp_path, defender_mapping())))
+    client_node = Node('fmu_compare_client', context=ros_context)
+    executor.add(builtin, fmu, client_node)
+    request = EvaluateDesign.Request(scenario='handling', n_vars=2, designs=[0.3, 0.4],
+                                     return_inputs=True)
+    answers = {}
+    for name in ('builtin_sim', 'fmu_sim'):
+        client = client_node.create_client(EvaluateDesign, f'/{name}/evaluate')
+        assert client.wait_for_service(timeout_sec=10.0)
+        answers[name] = wait(client.call_async(request), 120.0)
+        assert answers[name].success, answers[name].error
+    ours, theirs = answers['fmu_sim'], answers['builtin_sim']
+    rtol = DEFENDER_RTOL['handling']
+    np.testing.assert_allclose(ours.f, theirs.f, rtol=rtol)
+    np.testing.assert_allclose(ours.g, theirs.g, rtol=rtol)
+    shared = [n for n in ours.metric_names if n in theirs.metric_names]
+    assert len(shared) == len(ours.metric_names) >= 8
+    for name in shared:
+        np.testing.assert_allclose(ours.metrics[ours.metric_names.index(name)],
+                                   theirs.metrics[theirs.metric_names.index(name)],
+                                   rtol=rtol, atol=1e-12, err_msg=name)
+    mine, built = ours.inputs[0], theirs.inputs[0]
+    assert list(mine.names) == list(built.names)  # steering and the four slip angles
+    # The FMU samples every communication step (2 ms), the built-in histories every
+    # history step: compare on the built-in grid.
+    step = int(round(built.dt_s / mine.dt_s))
+    data = np.asarray(mine.data).reshape(len(mine.names), -1)[:, ::step]
+    reference = np.asarray(built.data).reshape(len(built.names), -1)
+    np.testing.assert_allclose(data[:, :reference.shape[1]], reference, rtol=1e-9,
+                               atol=1e-12)
 
 
 def test_ride_optimisation_with_an_fmu_worker_converges_and_its_bag_names_the_fmu(
