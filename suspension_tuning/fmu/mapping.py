@@ -107,15 +107,6 @@ class ScenarioMapping:
         """Communication steps from start to stop time."""
         return int(round((self.stop_time_s - self.start_time_s) / self.step_size_s))
 
-    def variables(self) -> list[VariableRef]:
-        """Every FMU variable this scenario names (parameters, inputs, outputs)."""
-        refs = [*self.design.values(), *self.outputs.values()]
-        if self.speed_parameter is not None:
-            refs.append(self.speed_parameter)
-        if self.road is not None:
-            refs.extend(self.road.inputs.values())
-        return refs
-
 
 @dataclass(frozen=True)
 class FmuMapping:

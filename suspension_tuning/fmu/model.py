@@ -89,9 +89,6 @@ class FmuModel:
         The mapping file itself is bad.
     """
 
-    #: The FMU worker publishes no telemetry topics (the FMU's channels are its own).
-    publishes_telemetry = False
-
     def __init__(self, fmu_path: str | Path, mapping: FmuMapping | str | Path) -> None:
         fmpy = _require_fmpy()
         from fmpy.model_description import read_model_description
