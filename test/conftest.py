@@ -136,20 +136,22 @@ def in_process_optimum():
     """``run(options, n_samples, scenario='ride')``: the 2-variable optimisation, in-process.
 
     Simplified-model gradients scaled by the in-process eq. 25 calibration from
-    ``n_samples`` full-model runs, the full model through ``evaluation.evaluate`` as
-    in the simulation node (handling: its steering and slip angles go to the
-    simplified model, paper 6.1): the bits a run through the graph must reach.
+    ``n_samples`` full-model runs, the full model through ``evaluation.evaluate`` (or
+    ``model.evaluate``, an FMU model) as in the simulation node (handling: its
+    steering and slip angles go to the simplified model, paper 6.1): the bits a run
+    through the graph must reach.
     """
-    def run(options: dict, n_samples: int, scenario: str = 'ride'):
+    def run(options: dict, n_samples: int, scenario: str = 'ride', model=None):
         from suspension_tuning import evaluation
         from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
         from suspension_tuning.tuning import FullEvaluation, TuningRequest, optimise
 
+        evaluate = evaluation.evaluate if model is None else model.evaluate
         scaling = calibrate(scenario, 2, n_samples=n_samples,
-                            run_full=lambda name, x: evaluation.evaluate(name, x).result)
+                            run_full=lambda name, x: evaluate(name, x).result)
 
         def full_model(points):
-            evaluated = evaluation.evaluate(scenario, points)
+            evaluated = evaluate(scenario, points)
             return FullEvaluation(evaluated.f, evaluated.g, evaluated.result)
 
         return optimise(TuningRequest(scenario, 2, None, 'simplified', options), full_model,
@@ -170,3 +172,34 @@ def foxglove_check():
     if reason:
         pytest.skip(f'Foxglove decoding check not run: {reason}')
     return foxglove.check
+
+
+FMU_SOURCES = os.path.join(os.path.dirname(__file__), 'fixtures', 'fmu')
+
+
+@pytest.fixture(scope='session')
+def fmus(tmp_path_factory) -> dict[str, str]:
+    """The test FMUs, built once per session with pythonfmu from test/fixtures/fmu/.
+
+    ``ride_inputs`` (FMI 2.0, road under each wheel as inputs), ``own_road`` (FMI 3.0,
+    a road of its own, declared units), ``failing`` (FMI 2.0, fails mid-run for some
+    designs) and ``defender`` (FMI 2.0, the product's own full model behind FMI).
+    """
+    from pythonfmu.builder import FmuBuilder
+    from pythonfmu3.builder import FmuBuilder as Fmu3Builder
+
+    dest = tmp_path_factory.mktemp('fmus')
+    plate = [os.path.join(FMU_SOURCES, 'plate_ride.py')]
+
+    def source(name: str) -> str:
+        return os.path.join(FMU_SOURCES, name)
+
+    return {
+        'ride_inputs': str(FmuBuilder.build_FMU(source('PlateRide.py'), dest=dest,
+                                                project_files=plate)),
+        'own_road': str(Fmu3Builder.build_FMU(source('PlateOwnRoad3.py'), dest=dest,
+                                              project_files=plate)),
+        'failing': str(FmuBuilder.build_FMU(source('FailingRide.py'), dest=dest,
+                                            project_files=plate)),
+        'defender': str(FmuBuilder.build_FMU(source('DefenderFmu.py'), dest=dest)),
+    }

@@ -24,6 +24,7 @@ import time
 from typing import Any
 
 import numpy as np
+import yaml
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
@@ -120,6 +121,15 @@ class CoordinatorNode(Node):
         clients = ReentrantCallbackGroup()
         self.pool = SimulationPool(self, list(self.get_parameter('sim_workers').value),
                                    self.timeout_s, clients, self._stopped)
+        # The full model each worker runs (its latched ~/model: built-in, or the FMU's
+        # file, identity and mapping), recorded in every run configuration.
+        self.worker_models: dict[str, Any] = {}
+        for worker in self.get_parameter('sim_workers').value:
+            name = str(worker).rstrip('/')
+            self.create_subscription(
+                String, f'{name}/model',
+                lambda msg, name=name: self.worker_models.__setitem__(
+                    name, yaml.safe_load(msg.data)), LATCHED, callback_group=clients)
         gradient_node = str(self.get_parameter('gradient_node').value).rstrip('/')
         self.gradient_client = self.create_client(EvaluateGradient, f'{gradient_node}/gradient',
                                                   callback_group=clients)
@@ -181,9 +191,18 @@ class CoordinatorNode(Node):
             'optimiser_options': request.options, 'fd_step': request.fd_step,
             'coordinator_parameters': {name: p.value for name, p in
                                        self.get_parameters_by_prefix('').items()},
+            'simulation_models': self._worker_models(),
         }
         stamp = f'started_unix_s: {time.time()!r}\n'
         self.config_pub.publish(String(data=dump_yaml(config) + stamp + self.static_config_yaml))
+
+    def _worker_models(self, wait_s: float = 2.0) -> dict[str, Any]:
+        """Each worker's model description; a worker not heard from within wait_s says so."""
+        names = [str(w).rstrip('/') for w in self.get_parameter('sim_workers').value]
+        deadline = time.monotonic() + wait_s
+        while any(n not in self.worker_models for n in names) and time.monotonic() < deadline:
+            time.sleep(0.02)  # the subscriptions are served by the node's executor
+        return {n: self.worker_models.get(n, 'no model description received') for n in names}
 
     def _full_model(self, request: TuningRequest):
         def evaluate(designs: np.ndarray) -> FullEvaluation:

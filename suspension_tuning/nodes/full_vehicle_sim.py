@@ -21,11 +21,19 @@ or 'inprocess' for the same controller without topics).
 
 Several workers run as ``--ros-args -r __node:=sim_0`` etc.; each serves its own
 ``/<name>/evaluate``.
+
+Parameter ``model``: 'builtin' (default) or 'fmu', a user's full vehicle model as an
+FMI co-simulation FMU (``fmu_path``, ``fmu_mapping``: docs/fmu.md), checked at
+start-up: a worker whose FMU or mapping does not fit does not start.  ``~/model``
+(std_msgs/String, latched) says which model the worker runs (for an FMU: its file,
+GUID or instantiation token and the mapping); the coordinator records it in the run
+configuration.  An FMU worker publishes no telemetry.
 """
 
 from __future__ import annotations
 
 import math
+import sys
 import threading
 import time
 
@@ -33,15 +41,18 @@ import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
+from std_msgs.msg import String
 from suspension_tuning_interfaces.msg import TimeHistories, ValveState, VehicleState
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
 from suspension_tuning import evaluation, simplified_inputs
+from suspension_tuning.fmu import FmuConfigError, MappingError, worker_model
 from suspension_tuning.nodes._services import serve
 from suspension_tuning.nodes._spin import run_node
+from suspension_tuning.paths import dump_yaml
 from suspension_tuning.vehicle.simplified import SimplifiedInputs
 
 CORNERS = ['FL', 'FR', 'RL', 'RR']
@@ -52,6 +63,9 @@ RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 #: whole run keeps every sample for the recorder; best-effort subscribers (plot tools)
 #: are compatible with it.
 TELEMETRY = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
+#: The worker's model description: a late subscriber (the coordinator) still gets it.
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class TopicValveController:
@@ -128,6 +142,18 @@ class FullVehicleSimNode(Node):
         self.declare_parameter('telemetry_decimation', 2)
         self.declare_parameter('valve_controller', 'ros')
         self.declare_parameter('closed_loop_timeout_s', 5.0)
+        self.declare_parameter('model', 'builtin')
+        self.declare_parameter('fmu_path', '')
+        self.declare_parameter('fmu_mapping', '')
+        try:  # before anything else: a bad FMU set-up leaves nothing half-started
+            self.fmu = worker_model(*(str(self.get_parameter(name).value)
+                                      for name in ('model', 'fmu_path', 'fmu_mapping')))
+        except (FmuConfigError, MappingError):
+            Node.destroy_node(self)
+            raise
+        self.model_pub = self.create_publisher(String, '~/model', LATCHED)
+        self.model_pub.publish(String(data=dump_yaml(
+            {'model': 'builtin'} if self.fmu is None else self.fmu.description())))
         self.clock_pub = self.create_publisher(Clock, '/clock', 10)
         self.state_pub = self.create_publisher(VehicleState, '/vehicle/state', RELIABLE)
         self.valve_answers: dict[int, tuple[int, int, int, int]] = {}
@@ -150,8 +176,11 @@ class FullVehicleSimNode(Node):
         try:
             designs = evaluation.parse_designs(request.scenario, int(request.n_vars),
                                                request.designs)
-            result = evaluation.evaluate(request.scenario, designs,
-                                         controllers=self._controllers(request, designs))
+            if self.fmu is None:
+                result = evaluation.evaluate(request.scenario, designs,
+                                             controllers=self._controllers(request, designs))
+            else:
+                result = self.fmu.evaluate(request.scenario, designs)
         except ValueError as error:
             response.success = False
             response.error = str(error)
@@ -174,7 +203,7 @@ class FullVehicleSimNode(Node):
             response.inputs = [simplified_inputs.pack(
                 SimplifiedInputs.from_scenario_result(result.result, i), TimeHistories())
                 for i in range(len(designs))]
-        if request.publish_telemetry:
+        if request.publish_telemetry and self.fmu is None:
             self.publish_telemetry(result.result.histories)
         response.wall_time_s = time.monotonic() - start
         return response
@@ -194,6 +223,12 @@ class FullVehicleSimNode(Node):
             self.valve_answers[int(msg.step)] = (msg.front_spring, msg.front_damping,
                                                  msg.rear_spring, msg.rear_damping)
             self.valve_news.notify_all()
+
+    def destroy_node(self) -> None:
+        """Close the FMU (if the worker runs one) too."""
+        if self.fmu is not None:
+            self.fmu.close()
+        super().destroy_node()
 
     def publish_telemetry(self, histories: dict[str, np.ndarray], index: int = 0) -> None:
         """Publish the time histories of design ``index`` on the telemetry topics."""
@@ -230,7 +265,13 @@ class FullVehicleSimNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning full_vehicle_sim``."""
-    run_node(FullVehicleSimNode, args)
+    try:
+        run_node(FullVehicleSimNode, args)
+    except (FmuConfigError, MappingError) as error:
+        import rclpy
+        rclpy.try_shutdown()
+        print(f'full_vehicle_sim: not started: {error}', file=sys.stderr)
+        sys.exit(2)
 
 
 if __name__ == '__main__':
