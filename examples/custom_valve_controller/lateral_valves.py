@@ -30,7 +30,6 @@ class LateralValveController(Node):
         self.on_mps2 = float(self.declare_parameter('on_mps2', 2.0).value)
         self.off_mps2 = float(self.declare_parameter('off_mps2', 1.0).value)
         self.state = RIDE_STATE
-        self.steps_answered = 0
         self.switches = 0
         self.command_pub = self.create_publisher(ValveState, '/suspension/valve_command',
                                                  RELIABLE)
@@ -54,4 +53,3 @@ class LateralValveController(Node):
          answer.rear_spring, answer.rear_damping) = self.state
         self.command_pub.publish(answer)
         self.state_pub.publish(answer)
-        self.steps_answered += 1

@@ -7,7 +7,6 @@ import math
 
 import pytest
 from lateral_valves import LateralValveController
-from suspension_tuning_interfaces.msg import IterationRecord
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
 from suspension_tuning.testing import decode
@@ -38,12 +37,14 @@ def test_ride_optimisation_runs_with_our_valve_controller_and_is_recorded(start_
     assert len(progress) == len(result.history) == result.n_full_runs  # one full run each
     assert result.physical_names[0] == 'dpsf_front'
 
-    bag = graph.recorded_bag()
+    bag = graph.recorded_bag()  # the run's bag, once the recorder has closed it
+    progress_type = bag.topics()['/optimisation/progress']
+    assert progress_type == 'suspension_tuning_interfaces/msg/IterationRecord'
     records = [decode(bag, m) for m in bag.on('/optimisation/progress')]
     assert [r.iteration for r in records] == [r.iteration for r in result.history]
     assert list(records[-1].x) == list(result.history[-1].x)  # the same bits as the action
-    assert bag.topics()['/optimisation/progress'] == IterationRecord.__module__.split('.')[0] \
-        + '/msg/IterationRecord'
+    # The coordinator's last run, at the optimum, published its telemetry into the bag.
+    assert bag.counts()['/full_vehicle_sim/telemetry/imu'] > 0
 
 
 def test_the_closed_loop_scenario_runs_against_our_valve_controller(start_tuning_graph):
