@@ -181,10 +181,14 @@ class TuningGraph:
                 if node not in replaced:
                     node.destroy_node()
             raise
-        for node in [*self.nodes.values(), self.client_node]:
-            self.add(node, num_threads=num_threads)
-        if self.record_dir is not None:
-            self._wait_for_recorder(ready_timeout_s)
+        try:
+            for node in [*self.nodes.values(), self.client_node]:
+                self.add(node, num_threads=num_threads)
+            if self.record_dir is not None:
+                self._wait_for_recorder(ready_timeout_s)
+        except BaseException:
+            self.shutdown()
+            raise
 
     def add(self, node: Node, num_threads: int = 4) -> Node:
         """Spin ``node`` on an executor of its own; it is destroyed with the graph."""
