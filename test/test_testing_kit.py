@@ -202,8 +202,13 @@ def test_a_bag_is_handed_out_only_once_closed_and_only_once(tmp_path):
         wait_for_bag(tmp_path, timeout_s=0.3, known={tmp_path / 'run_a'})
 
 
-def test_replacing_a_node_the_graph_does_not_have_is_an_error(ros_context):
+def test_replacing_or_configuring_a_node_the_graph_does_not_have_is_an_error(ros_context):
     from rclpy.node import Node
 
-    with pytest.raises(ValueError, match=r"no node named \['valve_control'\] in the graph"):
+    with pytest.raises(ValueError, match=r"no node named \['valve_control'\] in the graph to "
+                                         r"replace \(its nodes: \['full_vehicle_sim', "):
         TuningGraph(ros_context, replace={'valve_control': lambda **kw: Node('x', **kw)})
+    # A recorder's parameters, but no recorder (no record_dir): said, not ignored.
+    with pytest.raises(ValueError, match=r"no node named \['recorder'\] in the graph to set "
+                                         r"parameters on"):
+        TuningGraph(ros_context, parameters={'recorder': {'post_run_s': 0.5}})

@@ -132,7 +132,7 @@ class TuningGraph:
     Raises
     ------
     ValueError
-        If ``replace`` names a node that is not in the graph.
+        If ``replace`` or ``parameters`` names a node that is not in the graph.
     RosTimeoutError
         If the recorder does not subscribe to the run topics in time.
     """
@@ -163,10 +163,12 @@ class TuningGraph:
                             context=context, overrides=overrides)
         replaced: list[Node] = []
         try:
-            unknown = set(replace) - {node.get_name() for node in built}
-            if unknown:
-                raise ValueError(f'no node named {sorted(unknown)} in the graph to replace '
-                                 f'(its nodes: {[node.get_name() for node in built]})')
+            names = [node.get_name() for node in built]
+            for what, asked in (('to replace', replace), ('to set parameters on', parameters)):
+                unknown = sorted(set(asked) - set(names))
+                if unknown:
+                    raise ValueError(f'no node named {unknown} in the graph {what} '
+                                     f'(its nodes: {names})')
             for node in built:
                 name = node.get_name()
                 if name in replace:
