@@ -6,22 +6,15 @@ own batches.  A design gives the same bits alone or in a batch
 (test_full_model.py), so two workers give the scaling one worker gives.
 """
 
-import threading
-
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
+from suspension_tuning.testing import wait_for_future as wait
+
 pytestmark = pytest.mark.ros
 
 SAMPLES = 6  # fewer than the paper's 30 to keep the test short; same code path
-
-
-def wait(future, timeout_s=300.0):
-    done = threading.Event()
-    future.add_done_callback(lambda _: done.set())
-    assert done.wait(timeout_s), 'no answer in time'
-    return future.result()
 
 
 def test_calibration_samples_are_split_over_the_workers_with_the_same_scaling(

@@ -6,22 +6,16 @@ simplified runs per iteration.  The same loop in-process gives the same bits.
 """
 
 import re
-import threading
 
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
+from suspension_tuning.testing import wait_for_future as wait
+
 pytestmark = pytest.mark.ros
 
 SAMPLES = 12  # fewer than the paper's 30 to keep the test short; same code path
-
-
-def wait(future, timeout_s=300.0):
-    done = threading.Event()
-    future.add_done_callback(lambda _: done.set())
-    assert done.wait(timeout_s), 'no answer in time'
-    return future.result()
 
 
 @pytest.fixture
