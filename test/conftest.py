@@ -12,6 +12,7 @@ and the graph (``start_tuning_graph``).  Per-test timeouts come from pytest-time
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 
@@ -32,6 +33,12 @@ def _clean_stale_shared_memory() -> None:
 
 os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
 _clean_stale_shared_memory()
+# The Ctrl-C tests send SIGINT to the executables they start.  A shell runs a
+# background job with SIGINT ignored, and an ignored signal stays ignored across
+# exec: the executables would never see it.  With a handler of its own here, the
+# children start with the default disposition (exec resets handled signals).
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture
