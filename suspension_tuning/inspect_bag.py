@@ -83,9 +83,11 @@ def iterations(contents: BagContents) -> list[dict[str, Any]]:
     else:
         feedback = [t for t in contents.topics() if t.endswith(FEEDBACK_SUFFIX)]
         if feedback:
-            records = [
-                _record(decode(contents, m).feedback.latest) for m in contents.on(feedback[0])
-            ]
+            # Calibration feedback (phase 'calibration') carries no iteration; bags
+            # recorded before the phase field have iterations only.
+            decoded = [decode(contents, m).feedback for m in contents.on(feedback[0])]
+            records = [_record(f.latest) for f in decoded
+                       if getattr(f, 'phase', 'iteration') != 'calibration']
         else:
             result = optimum(contents)
             records = result['history'] if result else []

@@ -32,7 +32,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 from suspension_tuning_interfaces.action import Optimise
-from suspension_tuning_interfaces.msg import IterationRecord, TimeHistories
+from suspension_tuning_interfaces.msg import CalibrationProgress, IterationRecord, TimeHistories
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning.nodes._services import ServiceCallError, SimulationPool, call
@@ -135,6 +135,10 @@ class CoordinatorNode(Node):
                                                   callback_group=clients)
         self.calibrate_client = self.create_client(Calibrate, f'{gradient_node}/calibrate',
                                                    callback_group=clients)
+        # A calibration's progress, passed on as the calibrating goal's feedback.
+        self._calibrating: tuple[Any, TuningRequest] | None = None
+        self.create_subscription(CalibrationProgress, f'{gradient_node}/calibration_progress',
+                                 self._on_calibration_progress, 100, callback_group=clients)
         config = str(self.get_parameter('optimiser_config').value) or str(
             CONFIG_DIR / 'optimiser.yaml')
         self.options = load_options(config, str(self.get_parameter('optimiser_section').value))
@@ -232,14 +236,25 @@ class CoordinatorNode(Node):
             return np.asarray(response.df, float), dg
         return gradient
 
-    def _calibrate(self, request: TuningRequest) -> Calibrate.Response:
-        response = call(self, self.calibrate_client, Calibrate.Request(
-            scenario=request.scenario, n_vars=request.n_vars,
-            n_samples=int(self.get_parameter('calibration_samples').value), force=False),
-            self.timeout_s * 2, self._stopped)
+    def _calibrate(self, goal_handle, request: TuningRequest) -> Calibrate.Response:
+        self._calibrating = (goal_handle, request)
+        try:
+            response = call(self, self.calibrate_client, Calibrate.Request(
+                scenario=request.scenario, n_vars=request.n_vars,
+                n_samples=int(self.get_parameter('calibration_samples').value), force=False),
+                self.timeout_s * 2, self._stopped)
+        finally:
+            self._calibrating = None
         if not response.success:
             raise ValueError(f'calibration failed: {response.error}')
         return response
+
+    def _on_calibration_progress(self, msg: CalibrationProgress) -> None:
+        calibrating = self._calibrating
+        if calibrating is not None and (msg.scenario, msg.n_vars) == (
+                calibrating[1].scenario, calibrating[1].n_vars):
+            calibrating[0].publish_feedback(Optimise.Feedback(phase='calibration',
+                                                              calibration=msg))
 
     # ------------------------------------------------------------------ action
     def _execute(self, goal_handle) -> Optimise.Result:
@@ -279,13 +294,13 @@ class CoordinatorNode(Node):
         def on_iteration(record: dict[str, Any], counts: RunCounter) -> bool:
             msg = record_to_msg(record, counts, t0)
             history_msgs.append(msg)
-            goal_handle.publish_feedback(Optimise.Feedback(latest=msg))
+            goal_handle.publish_feedback(Optimise.Feedback(phase='iteration', latest=msg))
             self.progress_pub.publish(msg)
             return goal_handle.is_cancel_requested
 
         try:
             if request.gradient_source == 'simplified':
-                counter.calibration_runs = int(self._calibrate(request).n_full_runs)
+                counter.calibration_runs = int(self._calibrate(goal_handle, request).n_full_runs)
             result = optimise(request, self._full_model(request),
                               self._simplified_gradient(request), on_iteration,
                               counter=counter)

@@ -4,7 +4,9 @@ Service ``~/calibrate`` (Calibrate): the eq. 25 scaling of the simplified model 
 scenario onto the full model, from N full-model samples (default 30, paper 6.3.1)
 fetched over the graph from the simulation workers (``sim_workers``; a batch is split
 over the live workers as the coordinator splits its own, and a worker that fails has
-its designs sent to another).  The
+its designs sent to another), a chunk of ``calibration_chunk`` designs at a time;
+after each chunk ``~/calibration_progress`` (CalibrationProgress) says how many of
+the samples are done, which the coordinator passes on in its action feedback.  The
 scaling is cached in ``calibration_dir`` under a key of scenario, n_vars, samples, seed
 and a hash of the model configuration, so it costs its N full runs once.
 
@@ -24,6 +26,7 @@ import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
+from suspension_tuning_interfaces.msg import CalibrationProgress
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning import simplified_inputs
@@ -58,6 +61,8 @@ class GradientEvaluatorNode(Node):
         self.declare_parameter('default_samples', 30)
         self.declare_parameter('default_step', 0.025)
         self.declare_parameter('call_timeout_s', 600.0)
+        # Designs per progress step of a calibration (each step one batch to the workers).
+        self.declare_parameter('calibration_chunk', 6)
         directory = str(self.get_parameter('calibration_dir').value)
         self.calibration_dir = Path(directory or Path.home() / '.cache' / 'suspension_tuning'
                                     / 'calibration')
@@ -67,6 +72,8 @@ class GradientEvaluatorNode(Node):
         self.pool = SimulationPool(self, list(self.get_parameter('sim_workers').value),
                                    float(self.get_parameter('call_timeout_s').value),
                                    ReentrantCallbackGroup(), lambda: self.stopping)
+        self.progress_pub = self.create_publisher(CalibrationProgress,
+                                                  '~/calibration_progress', 100)
         serve(self, EvaluateGradient, '~/gradient', self._on_gradient,
               MutuallyExclusiveCallbackGroup())
         serve(self, Calibrate, '~/calibrate', self._on_calibrate,
@@ -124,11 +131,19 @@ class GradientEvaluatorNode(Node):
                           key: dict) -> Scaling:
         """Full-model samples from the simulation workers, then the eq. 25 fit."""
         # Only the handling model needs each sample's inputs (simplified_inputs.py).
-        try:
-            answers = self.pool.evaluate(scenario, n_vars, x,
-                                         return_inputs=scenario == 'handling')
-        except ValueError as error:
-            raise ValueError(f'full-model samples failed: {error}') from error
+        start = time.monotonic()
+        chunk = max(1, int(self.get_parameter('calibration_chunk').value))
+        answers = []
+        for part in np.array_split(x, -(-len(x) // chunk)):
+            try:
+                answers += self.pool.evaluate(scenario, n_vars, part,
+                                              return_inputs=scenario == 'handling')
+            except ValueError as error:
+                raise ValueError(f'full-model samples failed: {error}') from error
+            self.progress_pub.publish(CalibrationProgress(
+                scenario=scenario, n_vars=n_vars,
+                samples_done=sum(a.n_designs for a in answers), samples_total=len(x),
+                wall_time_s=time.monotonic() - start))
         full_f = np.concatenate([np.asarray(a.f, dtype=float) for a in answers])
         full_g = np.concatenate([np.asarray(a.g, dtype=float).reshape(a.n_designs,
                                                                       a.n_constraints)
