@@ -371,6 +371,8 @@ def write_plots(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]) -
                     for q in (s[1].orientation for s in samples)
                 ]
                 ax.plot(t, roll, label='roll deg')
+            elif first is not None and hasattr(first, 'accel'):  # AccelStamped: a seat
+                ax.plot(t, [s[1].accel.linear.z for s in samples], label='a_z m/s^2')
             elif first is not None and hasattr(first, 'name'):
                 field = 'effort' if any(len(s[1].effort) for s in samples) else 'position'
                 for j, name in enumerate(first.name):
