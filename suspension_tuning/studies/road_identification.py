@@ -20,8 +20,10 @@ say how well the road model explains the paper).  Vehicle parameters are not tou
 synthesised tracks, raw and as the tyre sees them after contact-patch averaging) against
 the ISO 8608 class boundaries.
 
-Run ``python -m suspension_tuning.studies.road_identification [--plot PNG]``: about
-20 full-model runs of 4 seeds x 4 corners, under a minute on 2 cores.
+Run ``python -m suspension_tuning.studies.road_identification [--plot PNG]
+[--sensitivity] [--no-fit]``: the grid is 29 points x 6 seeds of 4-design full-model
+batches, about a minute on 2 cores; ``--sensitivity`` adds the variants of
+:data:`SENSITIVITY_CASES` (bed roughness, joints, layout, speed).
 """
 
 from __future__ import annotations
@@ -211,6 +213,45 @@ def identify_sett_height(
     return Identification(best[0], best[1], best[2], evaluations)
 
 
+SENSITIVITY_CASES: dict[str, tuple[dict, float | None]] = {
+    'configured road': ({}, None),
+    'bed G_d0 1e-5 m^3 (paper 1e-4)': ({'gd_n0_m3': 1e-5}, None),
+    'bed G_d0 3e-4 m^3': ({'gd_n0_m3': 3e-4}, None),
+    'no joints': ({'joint_width_m': 0.0, 'joint_depth_m': 0.0}, None),
+    'independent stones and courses per track': ({'sett_layout': 'independent'}, None),
+    'speed 40 km/h': ({}, 40.0),
+    'speed 60 km/h': ({}, 60.0),
+}
+"""Variants of the identified road for :func:`sensitivity`: (road overrides, speed km/h)."""
+
+
+def sensitivity(
+    seeds: tuple[int, ...] = DEFAULT_SEEDS, params: VehicleParams | None = None
+) -> dict[str, CornerResponses]:
+    """Corner responses of the identified road and of the variants in SENSITIVITY_CASES.
+
+    Parameters
+    ----------
+    seeds : tuple of int
+        Road seeds.
+    params : VehicleParams, optional
+        Vehicle parameters (default config/*.yaml).
+
+    Returns
+    -------
+    dict
+        Case name -> :class:`CornerResponses`.
+    """
+    params = params if params is not None else load_vehicle_params()
+    out = {}
+    for name, (overrides, speed_kmh) in SENSITIVITY_CASES.items():
+        cfg = copy.deepcopy(load_scenarios_config())
+        if speed_kmh is not None:
+            cfg['ride']['speed_kmh'] = speed_kmh
+        out[name] = corner_responses(overrides, seeds, params, cfg)
+    return out
+
+
 def welch_psd(z_m: Array, dx_m: float, segment_m: float = 50.0) -> tuple[Array, Array]:
     """One-sided Welch PSD of an elevation record: (n cycles/m, G_d m^3)."""
     nper = int(round(segment_m / dx_m))
@@ -323,6 +364,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--seeds', type=int, nargs='+', default=list(DEFAULT_SEEDS))
     ap.add_argument('--plot', type=Path, default=None, help='write the PSD PNG here')
+    ap.add_argument('--sensitivity', action='store_true',
+                    help='corner values of the road variants of SENSITIVITY_CASES')  # fmt: skip
     ap.add_argument('--no-fit', action='store_true',
                     help='only evaluate the configured road (no identification)')  # fmt: skip
     args = ap.parse_args(argv)
@@ -345,6 +388,20 @@ def main(argv: list[str] | None = None) -> int:
         for key in ('a_min_mps2', 'a_max_mps2'):
             gm = np.exp(np.mean(np.log(getattr(ident.responses, key))))
             print(f'identified_{key}_geomean: {gm:.3f}')
+    if args.sensitivity:
+        print('| variant | smallest corner value, m/s^2 | largest corner value, m/s^2 '
+              '| largest g, dpsf 0.1 corners | largest g, dpsf 3 corners |')  # fmt: skip
+        print('|---|---|---|---|---|')
+        for name, resp in sensitivity(seeds, params).items():
+            g_low = resp.g[:, :2].max()
+            g_high = resp.g[:, 2:].max()
+            print(
+                f'| {name} | {resp.a_min_mps2.min():.2f}-{resp.a_min_mps2.max():.2f} '
+                f'(geomean {np.exp(np.mean(np.log(resp.a_min_mps2))):.2f}) '
+                f'| {resp.a_max_mps2.min():.2f}-{resp.a_max_mps2.max():.2f} '
+                f'(geomean {np.exp(np.mean(np.log(resp.a_max_mps2))):.2f}) '
+                f'| {g_low:+.2f} | {g_high:+.2f} |'
+            )
     if args.plot is not None:
         sc = load_scenarios_config()['ride']
         paper = road_mod.load_road_spec('belgian_paving_paper_iso8608')
