@@ -220,7 +220,7 @@ SENSITIVITY_CASES: dict[str, tuple[dict, float | None]] = {
     'no joints': ({'joint_width_m': 0.0, 'joint_depth_m': 0.0}, None),
     'independent stones and courses per track': ({'sett_layout': 'independent'}, None),
     'speed 40 km/h': ({}, 40.0),
-    'speed 60 km/h': ({}, 60.0),
+    'speed 60 km/h (road 600 m long)': ({'length_m': 600.0}, 60.0),
 }
 """Variants of the identified road for :func:`sensitivity`: (road overrides, speed km/h)."""
 
