@@ -766,6 +766,11 @@ def cost_ratios(case: dict[str, Any], calibration_samples: int) -> dict[str, flo
 
 
 # ---------------------------------------------------------------------- outputs
+def _cal_label(run: StudyRun) -> str:
+    """Calibration sample count of a simplified-gradient run, '-' for the others."""
+    return str(run.calibration_samples) if run.method == 'dq_simplified' else '-'
+
+
 def _fmt(value: float, digits: int = 4) -> str:
     return f'{value:.{digits}f}' if math.isfinite(value) else '-'
 
@@ -780,7 +785,7 @@ def markdown_tables(cases: Sequence[dict[str, Any]], calibration_samples: Sequen
     ]
     for case in cases:
         for r in case['runs']:
-            cal = str(r.calibration_samples) if r.method == 'dq_simplified' else '-'
+            cal = _cal_label(r)
             wall = f'{r.wall_time_s:.1f}'
             iters = '-' if r.method == 'reference' else str(r.iterations)
             if r.method == 'dq_simplified':
@@ -804,7 +809,7 @@ def markdown_tables(cases: Sequence[dict[str, Any]], calibration_samples: Sequen
     ]
     for case in cases:
         for r in case['runs']:
-            cal = str(r.calibration_samples) if r.method == 'dq_simplified' else '-'
+            cal = _cal_label(r)
             active = ', '.join(active_constraints(r.g)) or 'none'
             cells = ' | '.join(f'{v:+.3f}' for v in r.g)
             lines.append(
