@@ -357,7 +357,12 @@ def run_pareto(out: Path, n_vars: int = 4, n_points: int | None = None, bags: bo
                                   runs=[name for name, _, _ in runs[-2:]]))
         evaluate_points(points[-1:], n_vars)
         _fill_gaps(points)
-    passive = [p for p in points if p.kind != 'baseline']
+    # A passive design must keep its tyres on the road in both scenarios (eq. 11).
+    designs = [p for p in points if p.kind != 'baseline']
+    passive = [p for p in designs if max(p.g_ride + p.g_hand) <= gtol]
+    infeasible = [p.name for p in designs if max(p.g_ride + p.g_hand) > gtol]
+    if not passive:
+        raise ValueError('no passive design meets the eq. 11 constraints of both scenarios')
     keep = non_dominated([[p.f_ride, p.f_hand] for p in passive])
     baseline_dominated = not non_dominated(
         [[p.f_ride, p.f_hand] for p in [points[2], *passive]])[0]
@@ -365,7 +370,8 @@ def run_pareto(out: Path, n_vars: int = 4, n_points: int | None = None, bags: bo
     dominated = [p.name for p, k in zip(passive, keep) if not k]
     interior = [p for p in front if p.kind == 'front'] or front
     best = interior[best_compromise([[p.gap_ride_pct, p.gap_hand_pct] for p in interior])]
-    log(f'front: {len(front)} non-dominated points ({len(dominated)} dominated dropped); '
+    log(f'front: {len(front)} non-dominated points ({len(dominated)} dominated, '
+        f'{len(infeasible)} violating eq. 11 dropped); '
         f'best compromise {best.name}: gaps {best.gap_ride_pct:.1f} % ride, '
         f'{best.gap_hand_pct:.1f} % handling')
 
@@ -416,7 +422,8 @@ def run_pareto(out: Path, n_vars: int = 4, n_points: int | None = None, bags: bo
         'n_vars': n_vars, 'n_points': n_points, 'calibration_samples': calibration_samples,
         'eps': eps_values.tolist(), 'balanced_eps': eps_star,
         'points': [asdict(p) for p in points], 'baseline_dominated': baseline_dominated,
-        'front': [p.name for p in front], 'dominated': dominated, 'best_compromise': best.name,
+        'front': [p.name for p in front], 'dominated': dominated, 'infeasible': infeasible,
+        'best_compromise': best.name,
         'switched': switched, 'mixed': mixed_points,
         'mixed_valve_events': mixed['valve_events'],
         'mixed_stiff_volume_capped': mixed['stiff_volume_capped'],
@@ -446,6 +453,8 @@ def plot_front(payload: dict[str, Any], path: Path) -> Path:
             label='passive Pareto front (non-dominated)')
     for name in payload['dominated']:
         ax.plot(points[name]['f_hand'], points[name]['f_ride'], 'x', color='grey')
+    for name in payload['infeasible']:  # tyre lift-off beyond eq. 11 in a scenario
+        ax.plot(points[name]['f_hand'], points[name]['f_ride'], 'x', color='C3')
     best = points[payload['best_compromise']]
     ax.plot(best['f_hand'], best['f_ride'], 'o', mfc='none', ms=12, color='C1',
             label='best passive compromise')
@@ -578,8 +587,9 @@ simplified model), the handling run's eq. 11 constraints and the ride run's own,
 eps evenly spaced inside (f_hand(x_h), f_hand(x_r)), each from two starts (the
 previous front point and x_h), the better feasible one kept; then one more point at the
 eps where the ride and handling gaps balance (interpolated between the sweep points).
-Every value in the tables is the full model's.  Points another point beats in both
-objectives are dropped.
+Every value in the tables is the full model's.  Designs whose tyres leave the road
+for longer than eq. 11 allows in either scenario (g > gtol = 1e-3) are not passive
+candidates, and points another point beats in both objectives are dropped.
 
 **Gaps.**  gap(f) = 100 (f - f_opt) / (f_baseline - f_opt): the share of the
 improvement from the baseline vehicle to the single-objective optimum that a design
@@ -645,7 +655,9 @@ def markdown(payload: dict[str, Any], plot_name: str) -> str:
         f"- Passive front: {fig['passive_front_points']} non-dominated interior points "
         f"(of {payload['n_points']} eps values) plus the two end points"
         + (f"; dominated and dropped: {', '.join(payload['dominated'])}"
-           if payload['dominated'] else '') + '.',
+           if payload['dominated'] else '')
+        + (f"; dropped for tyre lift-off beyond eq. 11 in either scenario: "
+           f"{', '.join(payload['infeasible'])}" if payload['infeasible'] else '') + '.',
         '- The baseline vehicle is ' + ('dominated by the front (a passive design beats '
                                         'it in both objectives).' if payload[
                                             'baseline_dominated'] else
