@@ -8,7 +8,7 @@ what is wrong (wrong length, NaN, out of bounds, unknown scenario).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -136,3 +136,23 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
     names, table = metric_table(result.metrics, len(designs))
     return DesignEvaluation(f=np.asarray(result.f, float), g=np.asarray(result.g, float),
                             metric_names=names, metrics=table, result=result)
+
+
+def in_process_model(scenario: str) -> Callable[[Array], Any]:
+    """The full model of ``scenario`` in-process, as ``tuning.optimise`` calls it.
+
+    Returns a callable designs (m, n) -> ``tuning.FullEvaluation`` with the named
+    metrics (what extra constraints bound) and the scenario result as the simplified
+    model's inputs; 'mixed' runs with in-process valve controllers.
+    """
+    from suspension_tuning.tuning import FullEvaluation
+
+    if scenario not in scenarios():
+        raise ValueError(f'unknown scenario {scenario!r}; valid: {", ".join(scenarios())}')
+
+    def run(designs: Array) -> FullEvaluation:
+        result = evaluate(scenario, np.atleast_2d(np.asarray(designs, dtype=float)))
+        return FullEvaluation(f=result.f, g=result.g, inputs=result.result,
+                              metric_names=result.metric_names, metrics=result.metrics)
+
+    return run

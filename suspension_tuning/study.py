@@ -216,14 +216,12 @@ def full_model(scenario: str, n_vars: int) -> Callable[[Array], FullEvaluation]:
     With the named metrics (``evaluation.metric_table``), which extra constraints may
     bound; 'mixed' runs the closed-loop scenario with in-process valve controllers.
     """
-    from suspension_tuning.evaluation import evaluate as evaluate_designs
+    from suspension_tuning.evaluation import in_process_model
+
+    run = in_process_model(scenario)
 
     def evaluate(designs: Array) -> FullEvaluation:
-        result = evaluate_designs(scenario, validate_design(designs, n_vars))
-        return FullEvaluation(
-            f=result.f, g=result.g, inputs=result.result, metric_names=result.metric_names,
-            metrics=result.metrics,
-        )
+        return run(validate_design(designs, n_vars))
 
     return evaluate
 

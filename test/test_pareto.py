@@ -1,4 +1,5 @@
-"""The passive suspension, its ride-handling Pareto front and the switched 4S4."""
+"""The passive suspension, its ride-handling Pareto front, the switched 4S4, and the
+constrained in-process runs the front is made of (recorded and resumed)."""
 
 import json
 
@@ -140,3 +141,24 @@ def test_the_study_writes_json_plot_table_and_a_bag_per_run(quick_study):
     closed = study['switched']['closed_loop']
     mixed = {p['name']: p for p in study['mixed']}
     assert closed['f_hand'] < mixed['ride_optimum']['f_hand']
+
+
+def test_a_constrained_run_resumes_from_its_bag_with_its_constraints(tmp_path):
+    # Two iterations recorded, resumed to five: the iterates of an uninterrupted
+    # five-iteration run (deterministic model and optimiser; the bag's run
+    # configuration carries the extra constraint).
+    from suspension_tuning.resume import resume
+    from suspension_tuning.study import run_dynamic_q, vehicle_options, write_bag
+
+    spec = ['handling:f_hand<=1.2']  # active: the ride optimum has f_hand ~1.8
+    short, recorder = run_dynamic_q('ride', 2, 'centre', 'full',
+                                    options=vehicle_options() | {'maxiter': 2},
+                                    constraints=spec)
+    bag = write_bag(tmp_path / 'short', short, recorder)
+    resumed = resume(bag, max_iterations=5)
+    straight, _ = run_dynamic_q('ride', 2, 'centre', 'full',
+                                options=vehicle_options() | {'maxiter': 5},
+                                constraints=spec, record=False)
+    np.testing.assert_array_equal(resumed.x, straight.x)
+    assert resumed.nit == straight.iterations
+    assert resumed.constraint_values == straight.details['constraint_values']
