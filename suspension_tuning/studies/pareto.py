@@ -715,7 +715,7 @@ def main(args: Any) -> int:
     print()
     print(result['markdown'])
     for name, value in result['figures'].items():
-        print(f'{name}: {value:.4g}' if isinstance(value, float) else f'{name}: {value}')
+        print(f'{name}: {value:.2f}' if isinstance(value, float) else f'{name}: {value}')
     out = Path(args.out)
     print(f"results: {out / 'pareto.json'}\nplot: {result['plot']}\ntable: {out / 'pareto.md'}")
     if not args.no_bags:
