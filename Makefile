@@ -21,9 +21,9 @@ export AMENT_PREFIX_PATH := $(abspath $(VENV))
 INTERFACE_FILES := $(shell find suspension_tuning_interfaces -type f)
 PIP_QUIET := 2>&1 | { grep -v -e 'is ignored: it is neither' -e '^$$' || true; }
 
-.PHONY: setup test lint demo bench study clean
+.PHONY: setup test lint demo bench study sample-bag clean
 
-setup: $(STAMPS)/package
+setup: $(STAMPS)/package $(STAMPS)/npm
 
 $(STAMPS)/venv:
 	@mkdir -p $(STAMPS)
@@ -44,6 +44,18 @@ $(STAMPS)/package: $(STAMPS)/interfaces setup.py setup.cfg package.xml resource/
 	$(PY) scripts/install_ament_files.py $(VENV)
 	@touch $@
 
+# Foxglove's own decoding libraries (pinned in tools/foxglove/package-lock.json), installed
+# into tools/foxglove/node_modules: the tests decode recorded bags with them.  Without
+# npm on the machine those tests skip and say why.
+$(STAMPS)/npm: tools/foxglove/package.json tools/foxglove/package-lock.json
+	@mkdir -p $(STAMPS)
+	@if command -v npm >/dev/null; then \
+		npm ci --prefix tools/foxglove --no-audit --no-fund --loglevel=error; \
+	else \
+		echo "npm not found: the Foxglove decoding tests will be skipped"; \
+	fi
+	@touch $@
+
 lint: setup
 	$(VENV)/bin/ruff check .
 
@@ -59,5 +71,10 @@ study: setup
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b; done
 
+# bags/sample: the ride run of make demo, recorded again (after a change of the model,
+# the road or the bag layout), checked with Foxglove's decoder where node is installed.
+sample-bag: setup
+	$(PY) scripts/regenerate_sample_bag.py
+
 clean:
-	rm -rf $(VENV) $(STAMPS) build *.egg-info
+	rm -rf $(VENV) $(STAMPS) build *.egg-info tools/foxglove/node_modules

@@ -74,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from suspension_tuning.graph import SpinningGraph, build_nodes
     from suspension_tuning.inspect_bag import write_plots
-    from suspension_tuning.nodes._service_calls import wait_future
+    from suspension_tuning.nodes._spin import wait_future
     from suspension_tuning.tune import format_feedback
 
     rclpy.init()

@@ -459,8 +459,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         '--reindex',
         action='store_true',
-        help='first rewrite a truncated bag (killed recorder) into a complete '
-        'one, like ros2 bag reindex',
+        help='first rewrite the bag in place, like ros2 bag reindex: a truncated bag '
+        '(killed recorder) becomes a complete one, the schemas of an older bag come out '
+        'in the layout rosbag2 writes (and Foxglove decodes)',
     )
     args = parser.parse_args(argv)
     try:

@@ -23,7 +23,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from suspension_tuning_interfaces.action import Optimise
 
-from suspension_tuning.nodes._service_calls import wait_future
+from suspension_tuning.nodes._spin import wait_future
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:

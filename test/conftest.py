@@ -97,13 +97,14 @@ class SpinningExecutor:
 
         self.executor = MultiThreadedExecutor(num_threads=num_threads, context=context)
         self.nodes: list = []
+        self.stopped = False
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
 
     def _spin(self) -> None:
         from suspension_tuning.nodes._spin import spin_until_shutdown
 
-        spin_until_shutdown(self.executor)  # ends quietly when shut down
+        spin_until_shutdown(self.executor, stopped=lambda: self.stopped)  # ends quietly
 
     def add(self, *nodes: object) -> None:
         """Add nodes; they are destroyed when the executor shuts down."""
@@ -113,6 +114,7 @@ class SpinningExecutor:
 
     def shutdown(self) -> None:
         """Stop spinning, join the thread and destroy the nodes."""
+        self.stopped = True
         self.executor.shutdown(timeout_sec=5.0)
         self._thread.join(timeout=10.0)
         for node in self.nodes:
@@ -153,3 +155,18 @@ def in_process_optimum():
         return optimise(TuningRequest(scenario, 2, None, 'simplified', options), full_model,
                         SimplifiedGradient(scenario, 2, scaling))
     return run
+
+
+@pytest.fixture
+def foxglove_check():
+    """``check(bags, messages=False)``: decode bags with Foxglove's own npm libraries.
+
+    Skips the test, saying why, where node or the packages ``make setup`` installs into
+    tools/foxglove/node_modules are missing (see suspension_tuning/bag/foxglove.py).
+    """
+    from suspension_tuning.bag import foxglove
+
+    reason = foxglove.unavailable_reason()
+    if reason:
+        pytest.skip(f'Foxglove decoding check not run: {reason}')
+    return foxglove.check

@@ -49,9 +49,13 @@ def recorder(ros_context, tmp_path, **params):
     )
 
 
-def test_records_topics_service_events_and_action_feedback_and_status(
-    ros_context, executor, tmp_path, request
-):
+def record_session(ros_context, executor, tmp_path, request):
+    """Record progress, IMU, a service's events and an action's topics; return the bag path.
+
+    A fake graph publishes 20 progress records and 20 IMU messages, calls an
+    introspected EvaluateDesign service once and runs one Optimise goal (3 feedback
+    messages) while the recorder records one session bag.
+    """
     from rclpy.action import ActionClient, ActionServer
     from rclpy.callback_groups import ReentrantCallbackGroup
     from rclpy.node import Node
@@ -61,8 +65,6 @@ def test_records_topics_service_events_and_action_feedback_and_status(
     from suspension_tuning_interfaces.action import Optimise
     from suspension_tuning_interfaces.msg import IterationRecord
     from suspension_tuning_interfaces.srv import EvaluateDesign
-
-    from suspension_tuning.bag.reader import decode, read_messages
 
     node = recorder(ros_context, tmp_path, per_run=False, bag_name='session')
     graph = Node('graph_under_test', context=ros_context)
@@ -147,7 +149,15 @@ def test_records_topics_service_events_and_action_feedback_and_status(
     time.sleep(0.3)  # the status update of the finished goal
     path = node.session.bag.path
     node.close()
+    return path
 
+
+def test_records_topics_service_events_and_action_feedback_and_status(
+    ros_context, executor, tmp_path, request
+):
+    from suspension_tuning.bag.reader import decode, read_messages
+
+    path = record_session(ros_context, executor, tmp_path, request)
     contents = read_messages(path)
     assert contents.complete
     got = contents.counts()
@@ -198,6 +208,26 @@ def test_records_topics_service_events_and_action_feedback_and_status(
     assert imu_qos['reliability'] == 'best_effort'  # the publisher's offer, sensor data
     status_qos = channels['/coordinator/optimise/_action/status'].offered_qos_profiles[0]
     assert status_qos['durability'] == 'transient_local'  # action status is latched
+
+
+def test_recorded_bag_decodes_with_foxglove_parser_and_cdr_reader(
+    foxglove_check, ros_context, executor, tmp_path, request
+):
+    path = record_session(ros_context, executor, tmp_path, request)
+    [result] = foxglove_check([path])
+    assert result['complete']
+    errors = {c['topic']: c['error'] for c in result['channels'] if c['error']}
+    assert not errors
+    counts = {c['topic']: (c['decoded'], c['messages']) for c in result['channels']}
+    # every channel of the session, service events and action topics included, and
+    # every one of its messages (counts as in the test above)
+    assert counts['/optimisation/progress'] == (20, 20)
+    assert counts['/sim_0/telemetry/imu'] == (20, 20)
+    assert counts['/sim_0/evaluate/_service_event'] == (2, 2)
+    assert counts['/coordinator/optimise/_action/feedback'] == (3, 3)
+    decoded, recorded = counts['/coordinator/optimise/_action/status']
+    assert decoded == recorded >= 2
+    assert result['ok']
 
 
 def test_per_run_opens_a_bag_at_run_config_and_closes_it_at_result(

@@ -26,9 +26,12 @@ Several workers run as ``--ros-args -r __node:=sim_0`` etc.; each serves its own
 from __future__ import annotations
 
 import math
+import threading
 import time
 
 import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -37,8 +40,7 @@ from suspension_tuning_interfaces.msg import TimeHistories, ValveState, VehicleS
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
 from suspension_tuning import evaluation, simplified_inputs
-from suspension_tuning.nodes._service_calls import helper_node
-from suspension_tuning.nodes._service_thread import ServiceLoop, ServiceThread
+from suspension_tuning.nodes._services import serve
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.vehicle.simplified import SimplifiedInputs
 
@@ -76,25 +78,23 @@ class TopicValveController:
                            steering_rate_radps=state['steering_rate_radps'],
                            strut_pressure_pa=list(state['strut_pressure_pa']))
         msg.header.stamp, msg.header.frame_id = sim_time, 'base_link'
-        node.valve_answers.clear()
-        # The closed loop runs on a node and executor of its own, spun here by the
-        # service callback's thread (as rclpy's wait_for_message does): the answer must
-        # not wait for the node's shared executor, which may be busy or asleep.  A state
-        # without an answer within a second is published again (the controller's update
-        # is idempotent for a repeated step).
+        # The answer comes on another thread of the node's executor (the valve state
+        # subscription's callback group).  A state without an answer within a second
+        # is published again (the controller's update is idempotent for a repeated step).
         deadline = time.monotonic() + self.timeout_s
-        while True:
-            node.state_pub.publish(msg)
-            resend = min(time.monotonic() + 1.0, deadline)
-            while step not in node.valve_answers and time.monotonic() < resend:
-                node.loop_executor.spin_once(timeout_sec=0.05)
-            if step in node.valve_answers:
-                return node.valve_answers[step]
-            if time.monotonic() >= deadline:
-                raise RuntimeError(f'no valve state for step {step} within {self.timeout_s} '
-                                   's: is the valve_controller node running?')
-            node.get_logger().warning(f'no valve state for step {step} yet: publishing '
-                                      'the vehicle state again')
+        with node.valve_news:
+            node.valve_answers.clear()
+            while True:
+                node.state_pub.publish(msg)
+                wait = min(1.0, deadline - time.monotonic())
+                if node.valve_news.wait_for(lambda: step in node.valve_answers, wait):
+                    return node.valve_answers[step]
+                if time.monotonic() >= deadline:
+                    raise RuntimeError(f'no valve state for step {step} within '
+                                       f'{self.timeout_s} s: is the valve_controller node '
+                                       'running?')
+                node.get_logger().warning(f'no valve state for step {step} yet: '
+                                          'publishing the vehicle state again')
 
 
 def stamp(node: Node, t_s: float):
@@ -115,34 +115,38 @@ def quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, flo
 
 
 class FullVehicleSimNode(Node):
-    """Service adapter over :func:`suspension_tuning.evaluation.evaluate`."""
+    """Service adapter over :func:`suspension_tuning.evaluation.evaluate`.
 
-    def __init__(self, name: str = 'full_vehicle_sim', service_loop: ServiceLoop | None = None,
-                 **kwargs) -> None:
-        """``service_loop``: serve ``evaluate`` on this shared loop (default its own)."""
+    Multi-threaded: a closed-loop run's evaluate callback waits for valve states,
+    which the subscription's callback group takes meanwhile.
+    """
+
+    EXECUTOR = MultiThreadedExecutor
+
+    def __init__(self, name: str = 'full_vehicle_sim', **kwargs) -> None:
         super().__init__(name, **kwargs)
         self.declare_parameter('telemetry_decimation', 2)
         self.declare_parameter('valve_controller', 'ros')
         self.declare_parameter('closed_loop_timeout_s', 5.0)
-        self.loop_node, self.loop_executor = helper_node(self, f'{self.get_name()}_closed_loop')
-        self.clock_pub = self.loop_node.create_publisher(Clock, '/clock', 10)
-        self.state_pub = self.loop_node.create_publisher(VehicleState, '/vehicle/state',
-                                                         RELIABLE)
+        self.clock_pub = self.create_publisher(Clock, '/clock', 10)
+        self.state_pub = self.create_publisher(VehicleState, '/vehicle/state', RELIABLE)
         self.valve_answers: dict[int, tuple[int, int, int, int]] = {}
-        self.loop_node.create_subscription(ValveState, '/suspension/valve_state',
-                                           self._on_valve_state, RELIABLE)
-        # Served on a thread of its own (no executor in the path of a request).
-        self.evaluate_service = ServiceThread(self, EvaluateDesign, 'evaluate',
-                                              self._on_evaluate, loop=service_loop)
+        self.valve_news = threading.Condition()
+        self.create_subscription(ValveState, '/suspension/valve_state', self._on_valve_state,
+                                 RELIABLE, callback_group=MutuallyExclusiveCallbackGroup())
+        self.evaluate_service = serve(self, EvaluateDesign, '~/evaluate', self._on_evaluate,
+                                      MutuallyExclusiveCallbackGroup())
         self.pub = {name: self.create_publisher(kind, f'~/telemetry/{name}', TELEMETRY)
                     for name, kind in (('imu', Imu), ('struts', JointState),
                                        ('tyres', JointState), ('seats', JointState),
                                        ('steering', JointState))}
         self.runs = 0
+        self.evaluate_calls = 0
 
     def _on_evaluate(self, request: EvaluateDesign.Request,
                      response: EvaluateDesign.Response) -> EvaluateDesign.Response:
         start = time.monotonic()
+        self.evaluate_calls += 1
         try:
             designs = evaluation.parse_designs(request.scenario, int(request.n_vars),
                                                request.designs)
@@ -186,15 +190,10 @@ class FullVehicleSimNode(Node):
         return [TopicValveController(self, timeout)]
 
     def _on_valve_state(self, msg: ValveState) -> None:
-        self.valve_answers[int(msg.step)] = (msg.front_spring, msg.front_damping,
-                                             msg.rear_spring, msg.rear_damping)
-
-    def destroy_node(self) -> None:
-        """Destroy the evaluate service's thread and the closed-loop node too."""
-        self.evaluate_service.destroy()
-        self.loop_executor.shutdown(timeout_sec=1.0)
-        self.loop_node.destroy_node()
-        super().destroy_node()
+        with self.valve_news:
+            self.valve_answers[int(msg.step)] = (msg.front_spring, msg.front_damping,
+                                                 msg.rear_spring, msg.rear_damping)
+            self.valve_news.notify_all()
 
     def publish_telemetry(self, histories: dict[str, np.ndarray], index: int = 0) -> None:
         """Publish the time histories of design ``index`` on the telemetry topics."""
@@ -231,7 +230,7 @@ class FullVehicleSimNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning full_vehicle_sim``."""
-    run_node(FullVehicleSimNode, args, multithreaded=True)
+    run_node(FullVehicleSimNode, args)
 
 
 if __name__ == '__main__':

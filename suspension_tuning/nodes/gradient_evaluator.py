@@ -19,13 +19,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateDesign, EvaluateGradient
 
 from suspension_tuning import simplified_inputs
-from suspension_tuning.nodes import _logging
-from suspension_tuning.nodes._service_calls import ServiceCaller, ServiceCallError
-from suspension_tuning.nodes._service_thread import ServiceLoop, ServiceThread
+from suspension_tuning.nodes._services import ServiceCallError, call, serve
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.scaling import Scaling, scaling_key
 from suspension_tuning.optim.simplified_gradient import (
@@ -40,16 +40,16 @@ SCENARIOS = ('ride', 'handling')
 
 
 class GradientEvaluatorNode(Node):
-    """Service adapter over the eq. 25 calibration and the simplified gradient."""
+    """Service adapter over the eq. 25 calibration and the simplified gradient.
 
-    def __init__(self, service_loop: ServiceLoop | None = None, **kwargs) -> None:
-        """``service_loop``: serve ``gradient`` and ``calibrate`` on this shared loop.
+    Multi-threaded: ``calibrate`` waits for the simulation worker's response, which
+    the client's callback group takes meanwhile, and ``gradient`` (a callback group of
+    its own) is answered while a calibration runs.
+    """
 
-        By default ``gradient`` and ``calibrate`` have a loop (thread) each, and a
-        gradient is answered while a calibration runs.  On a shared loop, the
-        calibration's wait for the simulation worker answers the loop's requests
-        (the worker's ``evaluate`` among them, ``_service_calls.ServiceCaller``).
-        """
+    EXECUTOR = MultiThreadedExecutor
+
+    def __init__(self, **kwargs) -> None:
         super().__init__('gradient_evaluator', **kwargs)
         self.declare_parameter('sim_service', '/full_vehicle_sim/evaluate')
         self.declare_parameter('calibration_dir', '')
@@ -60,16 +60,15 @@ class GradientEvaluatorNode(Node):
         self.calibration_dir = Path(directory or Path.home() / '.cache' / 'suspension_tuning'
                                     / 'calibration')
         self.scalings: dict[tuple[str, int], Scaling] = {}
-        self.caller = ServiceCaller(self, serve_loop=service_loop)
-        self.sim_client = self.caller.create_client(EvaluateDesign,
-                                                    str(self.get_parameter('sim_service').value))
+        self.sim_client = self.create_client(EvaluateDesign,
+                                             str(self.get_parameter('sim_service').value),
+                                             callback_group=ReentrantCallbackGroup())
         self.simplified_runs = 0
-        # Served outside the node's executor: no executor is in the path of a request.
-        self.service_threads = [
-            ServiceThread(self, EvaluateGradient, 'gradient', self._on_gradient,
-                          loop=service_loop),
-            ServiceThread(self, Calibrate, 'calibrate', self._on_calibrate,
-                          loop=service_loop)]
+        self.stopping = False  # set by destroy_node: a calibration stops waiting
+        serve(self, EvaluateGradient, '~/gradient', self._on_gradient,
+              MutuallyExclusiveCallbackGroup())
+        serve(self, Calibrate, '~/calibrate', self._on_calibrate,
+              MutuallyExclusiveCallbackGroup())
 
     # ---------------------------------------------------------------- calibrate
     def _cache_path(self, key: dict) -> Path:
@@ -113,8 +112,7 @@ class GradientEvaluatorNode(Node):
             response.r_squared.append(float(function.r2))
         response.success = True
         response.wall_time_s = time.monotonic() - start
-        _logging.info(
-            self,
+        self.get_logger().info(
             f'{scenario}/{n_vars} calibrated ({"cache" if response.from_cache else "full runs"}): '
             + ', '.join(f'{f.name} R2={f.r2:.3f}' if f.rule == 'eq25' else f'{f.name} {f.rule}'
                         for f in scaling.functions))
@@ -125,9 +123,9 @@ class GradientEvaluatorNode(Node):
         """Full-model samples from a simulation worker, then the eq. 25 fit."""
         timeout = float(self.get_parameter('call_timeout_s').value)
         # Only the handling model needs each sample's inputs (simplified_inputs.py).
-        answer = self.caller.call(self.sim_client, EvaluateDesign.Request(
+        answer = call(self, self.sim_client, EvaluateDesign.Request(
             scenario=scenario, n_vars=n_vars, designs=x.ravel().tolist(),
-            return_inputs=scenario == 'handling'), timeout)
+            return_inputs=scenario == 'handling'), timeout, stopping=lambda: self.stopping)
         if not answer.success:
             raise ValueError(f'full-model samples failed: {answer.error}')
         full_f = np.asarray(answer.f, dtype=float)
@@ -174,16 +172,13 @@ class GradientEvaluatorNode(Node):
         return scenario, int(n_vars)
 
     def destroy_node(self) -> None:
-        """Destroy the service threads and the private client node too."""
-        for service in self.service_threads:
-            service.destroy()
-        self.caller.destroy()
+        """Let a calibration's wait end (within a second), then destroy the node."""
+        self.stopping = True
         super().destroy_node()
-
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning gradient_evaluator``."""
-    run_node(GradientEvaluatorNode, args, multithreaded=True)
+    run_node(GradientEvaluatorNode, args)
 
 
 if __name__ == '__main__':
