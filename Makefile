@@ -1,6 +1,6 @@
 # suspension_tuning: the two commands a user needs on a fresh machine are
 #   make demo    (sets everything up, then runs the main job)
-#   make test    (sets everything up, then runs ruff and the test suite)
+#   make test    (sets everything up, then runs ruff, the test suite and the example project)
 # `make setup` is idempotent: stamps in .stamps/ make it take seconds when nothing changed.
 
 SHELL := /bin/bash
@@ -59,8 +59,11 @@ $(STAMPS)/npm: tools/foxglove/package.json tools/foxglove/package-lock.json
 lint: setup
 	$(VENV)/bin/ruff check .
 
+# The example project runs from its own folder, against the installed package and
+# the testing kit's pytest plugin, as a user's project would.
 test: lint
 	$(PY) -m pytest test
+	cd examples/custom_valve_controller && $(abspath $(PY)) -m pytest
 
 demo: setup
 	$(PY) -m suspension_tuning.demo

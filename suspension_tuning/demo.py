@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
             handle = wait_future(action.send_goal_async(
                 Optimise.Goal(scenario=scenario, n_vars=args.n_vars,
                               gradient_source='simplified'),
-                feedback_callback=lambda fb: print('  ' + format_feedback(fb.feedback.latest),
+                feedback_callback=lambda fb: print('  ' + format_feedback(fb.feedback),
                                                    flush=True)), 60)
             result = wait_future(handle.get_result_async()).result
             status |= 0 if result.success else 1

@@ -70,10 +70,8 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
         raise ValueError(f'no node {", ".join(unknown)} in the graph to replace; its nodes: '
                          + ', '.join(makers))
     makers.update(factories or {})
-    graph_set = {'gradient_evaluator': [Parameter('sim_service',
-                                                  value=f'/{names[0]}/evaluate')],
-                 'coordinator': [Parameter('sim_workers',
-                                           value=[f'/{name}' for name in names])]}
+    workers_set = [Parameter('sim_workers', value=[f'/{name}' for name in names])]
+    graph_set = {'gradient_evaluator': workers_set, 'coordinator': workers_set}
     overrides = overrides or {}
     return [make(context=context,
                  parameter_overrides=[*graph_set.get(name, []), *overrides.get(name, [])])

@@ -77,10 +77,11 @@ def test_ride_optimisation_through_the_one_process_graph_gives_the_in_process_bi
     # Not on the thread that spins the coordinator's executor (a thread of its pool).
     executor_thread = graph.threads[graph.nodes.index(coordinator)]
     assert len(goal_threads) == 1 and goal_threads[0] != executor_thread.ident
-    # Every full run went over the middleware: the calibration batch, one per
-    # iteration evaluated, and the telemetry run of the optimum (final_telemetry).
-    assert nodes[0].evaluate_calls == 1 + len(result.history) + 1
-    assert len(feedback) == len(result.history)
+    # Every full run went over the middleware: the calibration batch (its 12 samples in
+    # two chunks of calibration_chunk = 6, config/graph.yaml), one per iteration
+    # evaluated, and the telemetry run of the optimum (final_telemetry).
+    assert nodes[0].evaluate_calls == 2 + len(result.history) + 1
+    assert [m.feedback.phase for m in feedback].count('iteration') == len(result.history)
     assert result.n_calibration_runs == SAMPLES
     local = in_process_optimum(coordinator.options.as_dict(), SAMPLES)
     np.testing.assert_array_equal(result.x, local.x)

@@ -10,16 +10,9 @@ import time
 import pytest
 import yaml
 
+from suspension_tuning.testing import wait_until as wait_for
+
 pytestmark = pytest.mark.ros
-
-
-def wait_for(predicate, timeout=15.0, period=0.05):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(period)
-    return predicate()
 
 
 def latched_qos():
@@ -316,7 +309,7 @@ def publish_and_wait_recorded(ros_context, executor, process, tmp_path, n):
     talker = Node('talker_under_test', context=ros_context)
     executor.add(talker)
     publisher = talker.create_publisher(String, '/chatter', 100)
-    assert wait_for(lambda: publisher.get_subscription_count() > 0, timeout=30.0), process.poll()
+    assert wait_for(lambda: publisher.get_subscription_count() > 0, timeout_s=30.0), process.poll()
     for k in range(n):
         publisher.publish(String(data=f'message {k}'))
         time.sleep(0.01)
@@ -324,7 +317,7 @@ def publish_and_wait_recorded(ros_context, executor, process, tmp_path, n):
     # the node flushes the open chunk every 0.2 s: all n are on disk soon after
     assert wait_for(
         lambda: mcap.is_file() and len(read_messages(mcap, topics=['/chatter']).messages) == n,
-        timeout=10.0,
+        timeout_s=10.0,
     )
     return mcap
 

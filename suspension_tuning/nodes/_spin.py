@@ -95,6 +95,6 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None) -> No
     try:
         spin_until_shutdown(executor)
     finally:
-        executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
+        executor.shutdown(timeout_sec=1.0)
         rclpy.try_shutdown()

@@ -27,6 +27,7 @@ import time
 from typing import Any
 
 import numpy as np
+import yaml
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
@@ -34,7 +35,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 from suspension_tuning_interfaces.action import Optimise
-from suspension_tuning_interfaces.msg import IterationRecord, TimeHistories
+from suspension_tuning_interfaces.msg import CalibrationProgress, IterationRecord, TimeHistories
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning.nodes._services import ServiceCallError, SimulationPool, call
@@ -123,11 +124,25 @@ class CoordinatorNode(Node):
         clients = ReentrantCallbackGroup()
         self.pool = SimulationPool(self, list(self.get_parameter('sim_workers').value),
                                    self.timeout_s, clients, self._stopped)
+        # The full model each worker runs (its latched ~/model: built-in, or the FMU's
+        # file, identity and mapping), recorded in every run configuration.
+        self.worker_models: dict[str, Any] = {}
+        for worker in self.get_parameter('sim_workers').value:
+            name = str(worker).rstrip('/')
+            self.create_subscription(
+                String, f'{name}/model',
+                lambda msg, name=name: self.worker_models.__setitem__(
+                    name, yaml.safe_load(msg.data)), LATCHED, callback_group=clients)
         gradient_node = str(self.get_parameter('gradient_node').value).rstrip('/')
         self.gradient_client = self.create_client(EvaluateGradient, f'{gradient_node}/gradient',
                                                   callback_group=clients)
         self.calibrate_client = self.create_client(Calibrate, f'{gradient_node}/calibrate',
                                                    callback_group=clients)
+        # A calibration's progress, passed on as the calibrating goal's feedback.
+        # (goal handle, scenario, n_vars) of the calibration under way.
+        self._calibrating: tuple[Any, str, int] | None = None
+        self.create_subscription(CalibrationProgress, f'{gradient_node}/calibration_progress',
+                                 self._on_calibration_progress, 100, callback_group=clients)
         config = str(self.get_parameter('optimiser_config').value) or str(
             CONFIG_DIR / 'optimiser.yaml')
         self.options = load_options(config, str(self.get_parameter('optimiser_section').value))
@@ -187,9 +202,18 @@ class CoordinatorNode(Node):
             'constraint_gradient_sources': request.constraint_gradient_sources(),
             'coordinator_parameters': {name: p.value for name, p in
                                        self.get_parameters_by_prefix('').items()},
+            'simulation_models': self._worker_models(),
         }
         stamp = f'started_unix_s: {time.time()!r}\n'
         self.config_pub.publish(String(data=dump_yaml(config) + stamp + self.static_config_yaml))
+
+    def _worker_models(self, wait_s: float = 2.0) -> dict[str, Any]:
+        """Each worker's model description; a worker not heard from within wait_s says so."""
+        names = [str(w).rstrip('/') for w in self.get_parameter('sim_workers').value]
+        deadline = time.monotonic() + wait_s
+        while any(n not in self.worker_models for n in names) and time.monotonic() < deadline:
+            time.sleep(0.02)  # the subscriptions are served by the node's executor
+        return {n: self.worker_models.get(n, 'no model description received') for n in names}
 
     def _full_model(self, request: TuningRequest, scenario: str | None = None):
         """The full model of ``scenario`` (default the objective's) on the workers."""
@@ -238,15 +262,26 @@ class CoordinatorNode(Node):
             if source == 'simplified']
         return list(dict.fromkeys(names))
 
-    def _calibrate(self, request: TuningRequest, scenario: str | None = None
+    def _calibrate(self, goal_handle, request: TuningRequest, scenario: str | None = None
                    ) -> Calibrate.Response:
-        response = call(self, self.calibrate_client, Calibrate.Request(
-            scenario=scenario or request.scenario, n_vars=request.n_vars,
-            n_samples=int(self.get_parameter('calibration_samples').value), force=False),
-            self.timeout_s * 2, self._stopped)
+        scenario = scenario or request.scenario
+        self._calibrating = (goal_handle, scenario, request.n_vars)
+        try:
+            response = call(self, self.calibrate_client, Calibrate.Request(
+                scenario=scenario, n_vars=request.n_vars,
+                n_samples=int(self.get_parameter('calibration_samples').value), force=False),
+                self.timeout_s * 2, self._stopped)
+        finally:
+            self._calibrating = None
         if not response.success:
             raise ValueError(f'calibration failed: {response.error}')
         return response
+
+    def _on_calibration_progress(self, msg: CalibrationProgress) -> None:
+        calibrating = self._calibrating
+        if calibrating is not None and (msg.scenario, msg.n_vars) == calibrating[1:]:
+            calibrating[0].publish_feedback(Optimise.Feedback(phase='calibration',
+                                                              calibration=msg))
 
     # ------------------------------------------------------------------ action
     def _execute(self, goal_handle) -> Optimise.Result:
@@ -286,7 +321,7 @@ class CoordinatorNode(Node):
         def on_iteration(record: dict[str, Any], counts: RunCounter) -> bool:
             msg = record_to_msg(record, counts, t0)
             history_msgs.append(msg)
-            goal_handle.publish_feedback(Optimise.Feedback(latest=msg))
+            goal_handle.publish_feedback(Optimise.Feedback(phase='iteration', latest=msg))
             self.progress_pub.publish(msg)
             return goal_handle.is_cancel_requested
 
@@ -295,7 +330,7 @@ class CoordinatorNode(Node):
             if request.gradient_source == 'simplified':
                 for scenario in self._simplified_scenarios(request):
                     counter.calibration_runs += int(
-                        self._calibrate(request, scenario).n_full_runs)
+                        self._calibrate(goal_handle, request, scenario).n_full_runs)
                     gradients[scenario] = self._simplified_gradient(request, scenario)
             models = {name: self._full_model(request, name)
                       for name in request.constraint_scenarios}

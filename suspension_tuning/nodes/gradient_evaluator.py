@@ -2,7 +2,11 @@
 
 Service ``~/calibrate`` (Calibrate): the eq. 25 scaling of the simplified model of a
 scenario onto the full model, from N full-model samples (default 30, paper 6.3.1)
-fetched over the graph from a simulation worker (``sim_service``) in one batch.  The
+fetched over the graph from the simulation workers (``sim_workers``; a batch is split
+over the live workers as the coordinator splits its own, and a worker that fails has
+its designs sent to another), a chunk of ``calibration_chunk`` designs at a time;
+after each chunk ``~/calibration_progress`` (CalibrationProgress) says how many of
+the samples are done, which the coordinator passes on in its action feedback.  The
 scaling is cached in ``calibration_dir`` under a key of scenario, n_vars, samples, seed
 and a hash of the model configuration, so it costs its N full runs once.
 
@@ -22,10 +26,11 @@ import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
-from suspension_tuning_interfaces.srv import Calibrate, EvaluateDesign, EvaluateGradient
+from suspension_tuning_interfaces.msg import CalibrationProgress
+from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning import simplified_inputs
-from suspension_tuning.nodes._services import ServiceCallError, call, serve
+from suspension_tuning.nodes._services import ServiceCallError, SimulationPool, serve
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.scaling import Scaling, scaling_key
 from suspension_tuning.optim.simplified_gradient import (
@@ -51,20 +56,24 @@ class GradientEvaluatorNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('gradient_evaluator', **kwargs)
-        self.declare_parameter('sim_service', '/full_vehicle_sim/evaluate')
+        self.declare_parameter('sim_workers', ['/full_vehicle_sim'])
         self.declare_parameter('calibration_dir', '')
         self.declare_parameter('default_samples', 30)
         self.declare_parameter('default_step', 0.025)
         self.declare_parameter('call_timeout_s', 600.0)
+        # Designs per progress step of a calibration (each step one batch to the workers).
+        self.declare_parameter('calibration_chunk', 6)
         directory = str(self.get_parameter('calibration_dir').value)
         self.calibration_dir = Path(directory or Path.home() / '.cache' / 'suspension_tuning'
                                     / 'calibration')
         self.scalings: dict[tuple[str, int], Scaling] = {}
-        self.sim_client = self.create_client(EvaluateDesign,
-                                             str(self.get_parameter('sim_service').value),
-                                             callback_group=ReentrantCallbackGroup())
         self.simplified_runs = 0
         self.stopping = False  # set by destroy_node: a calibration stops waiting
+        self.pool = SimulationPool(self, list(self.get_parameter('sim_workers').value),
+                                   float(self.get_parameter('call_timeout_s').value),
+                                   ReentrantCallbackGroup(), lambda: self.stopping)
+        self.progress_pub = self.create_publisher(CalibrationProgress,
+                                                  '~/calibration_progress', 100)
         serve(self, EvaluateGradient, '~/gradient', self._on_gradient,
               MutuallyExclusiveCallbackGroup())
         serve(self, Calibrate, '~/calibrate', self._on_calibrate,
@@ -120,18 +129,28 @@ class GradientEvaluatorNode(Node):
 
     def _calibrate_remote(self, scenario: str, n_vars: int, x: np.ndarray,
                           key: dict) -> Scaling:
-        """Full-model samples from a simulation worker, then the eq. 25 fit."""
-        timeout = float(self.get_parameter('call_timeout_s').value)
+        """Full-model samples from the simulation workers, then the eq. 25 fit."""
         # Only the handling model needs each sample's inputs (simplified_inputs.py).
-        answer = call(self, self.sim_client, EvaluateDesign.Request(
-            scenario=scenario, n_vars=n_vars, designs=x.ravel().tolist(),
-            return_inputs=scenario == 'handling'), timeout, stopping=lambda: self.stopping)
-        if not answer.success:
-            raise ValueError(f'full-model samples failed: {answer.error}')
-        full_f = np.asarray(answer.f, dtype=float)
-        full_g = np.asarray(answer.g, dtype=float).reshape(len(x), answer.n_constraints)
+        start = time.monotonic()
+        chunk = max(1, int(self.get_parameter('calibration_chunk').value))
+        answers = []
+        for part in np.array_split(x, -(-len(x) // chunk)):
+            try:
+                answers += self.pool.evaluate(scenario, n_vars, part,
+                                              return_inputs=scenario == 'handling')
+            except ValueError as error:
+                raise ValueError(f'full-model samples failed: {error}') from error
+            self.progress_pub.publish(CalibrationProgress(
+                scenario=scenario, n_vars=n_vars,
+                samples_done=sum(a.n_designs for a in answers), samples_total=len(x),
+                wall_time_s=time.monotonic() - start))
+        full_f = np.concatenate([np.asarray(a.f, dtype=float) for a in answers])
+        full_g = np.concatenate([np.asarray(a.g, dtype=float).reshape(a.n_designs,
+                                                                      a.n_constraints)
+                                 for a in answers])
+        messages = [message for a in answers for message in a.inputs]
         inputs = [simplified_inputs.unpack(scenario, message, x[i])
-                  for i, message in enumerate(answer.inputs)] or None
+                  for i, message in enumerate(messages)] or None
         self.simplified_runs += len(x)
         return fit_calibration(scenario, n_vars, x, full_f, full_g, inputs, key)
 
@@ -175,6 +194,7 @@ class GradientEvaluatorNode(Node):
         """Let a calibration's wait end (within a second), then destroy the node."""
         self.stopping = True
         super().destroy_node()
+
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning gradient_evaluator``."""
