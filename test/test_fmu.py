@@ -126,8 +126,9 @@ def test_fmu_with_road_inputs_scores_the_model_it_wraps_with_our_road_and_metric
     # The road reaches the seats: a flat road would give a_rms = 0; the paving gives
     # tenths of m/s^2 (the built-in model gives 0.15-0.2 at these designs).
     assert np.all(a_d > 0.02) and np.all(a_p > 0.02)
-    # No tyre leaves the ground on this road: eq. 11 gives 10 (0 - 0.1) = -1.
-    np.testing.assert_array_equal(result.g, -1.0)
+    # On the sett paving the plate model's tyres leave the ground now and then, but
+    # for less than eq. 11's 10 % of the time at these designs: -1 < g < 0.
+    assert np.all(result.g > -1.0) and np.all(result.g < 0.0)
     assert result.result.histories['t_s'][-1] == pytest.approx(STOP_S)
 
 
@@ -195,6 +196,11 @@ def test_fmu_failing_mid_run_names_the_design_and_the_model_keeps_serving(fmus):
 #: built-in recording with the in-kernel speed controller's force of that step
 #: (seen: 7e-5).
 DEFENDER_RTOL = {'ride': 1e-3, 'handling': 1e-9}
+#: Ride lift-off fractions (eq. 11 and the tyre_lift_off_fraction metric) count 500 Hz
+#: samples of the 27 s metric window (config/scenarios.yaml): the drive-force difference
+#: above may move a lift-off instant on the sett paving by one sample, 1 / 13,500 of
+#: the fraction (10 / 13,500 in g).
+RIDE_SAMPLE_FRACTION = 1.0 / 13_500
 
 
 def defender_mapping():
@@ -229,11 +235,13 @@ def test_fmu_wrapping_our_full_model_answers_like_the_builtin_model(fmus):
         for scenario, rtol in DEFENDER_RTOL.items():
             ours, builtin = fmu.evaluate(scenario, x), evaluation.evaluate(scenario, x)
             np.testing.assert_allclose(ours.f, builtin.f, rtol=rtol)
-            np.testing.assert_allclose(ours.g, builtin.g, rtol=rtol)
+            one_sample = RIDE_SAMPLE_FRACTION if scenario == 'ride' else 0.0
+            np.testing.assert_allclose(ours.g, builtin.g, rtol=rtol, atol=10 * one_sample)
             assert len(ours.metric_names) >= 8
             for name in ours.metric_names:
+                atol = one_sample if name == 'tyre_lift_off_fraction' else 1e-12
                 np.testing.assert_allclose(metric(ours, name), metric(builtin, name),
-                                           rtol=rtol, atol=1e-12,
+                                           rtol=rtol, atol=atol,
                                            err_msg=f'{scenario} {name}')
             if scenario == 'handling':
                 # The simplified handling model fed the FMU's steering and slip angles

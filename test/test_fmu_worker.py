@@ -176,8 +176,12 @@ def test_ride_optimisation_with_an_fmu_worker_converges_and_its_bag_names_the_fm
     with FmuModel(fmus['ride_inputs'], mapping_path) as fmu:
         local = in_process_optimum(options, SAMPLES, model=fmu)
         guid = fmu.description()['guid']
-    np.testing.assert_array_equal(result.x, local.x)
-    assert result.f == local.f
+    # The same optimum to round-off.  On the sett paving the worker's run and the
+    # in-process run of this FMU differ in the last bits of x (1e-15, from 12
+    # iterations); the built-in worker reaches the in-process bits exactly
+    # (test_graph_simplified.py).
+    np.testing.assert_allclose(result.x, local.x, rtol=1e-12, atol=1e-14)
+    assert result.f == pytest.approx(local.f, rel=1e-12)
     assert local.status in (0, 1), local.message  # converged (dynamic_q.STATUS_MESSAGES)
     bags = sorted(Path(tmp_path / 'bags').iterdir())
     assert len(bags) == 1, bags

@@ -13,8 +13,16 @@ def ride():
     return evaluation.evaluate('ride', np.array([[0.5, 0.5]])).result
 
 
-def test_body_vertical_acceleration_is_the_second_derivative_of_heave(ride):
-    h = ride.histories
+def test_body_vertical_acceleration_is_the_second_derivative_of_heave():
+    # On the paper-literal ISO 8608 road (long waves, config/road.yaml): the sett
+    # paving's stone edges put content above what differences of a 250 Hz history
+    # resolve.
+    from suspension_tuning.vehicle.params import load_scenarios_config
+    from suspension_tuning.vehicle.scenarios import run_scenario
+
+    config = load_scenarios_config()
+    config['ride'] = {**config['ride'], 'road': 'belgian_paving_paper_iso8608'}
+    h = run_scenario('ride', np.array([[0.5, 0.5]]), config=config).histories
     t = h['t_s']
     dt = t[1] - t[0]
     az = h['vertical_accel_mps2'][0]

@@ -388,7 +388,10 @@ class FmuModel:
         runs = np.stack([self._run_one(sm, i, x[i], values[i], inputs) for i in range(len(x))])
         wall = time.perf_counter() - start
         conv = self.conversions[scenario]
-        ch = {key: conv[f'outputs.{key}'].to_si(runs[:, j])
+        # Each channel contiguous per design: reductions over a strided view sum in an
+        # order that depends on the batch, and a design must give the same bits alone,
+        # in a batch or in the calibration's chunks.
+        ch = {key: np.ascontiguousarray(conv[f'outputs.{key}'].to_si(runs[:, j]))
               for j, key in enumerate(sm.outputs)}
         if scenario == 'ride':
             result = self._ride(sm, x, ch, wall)

@@ -4,10 +4,11 @@
 eqs. 4-8) and returns the objective f (eq. 9 or 10), the tyre-hop constraints g (eq. 11),
 named metrics and decimated time histories.
 
-- ride: straight run over the Belgian paving (config/road.yaml, G_d0 = 1e-4 m^3, w = 4)
-  in the ride valve state (soft spring, low damping); the design sets the soft gas volume
-  and the low-damping dpsf.  Metrics after ``settle_s``: BS 6841 W_b weighted RMS
-  vertical acceleration at the driver and rear passenger seats (full integration rate, 500 Hz).
+- ride: straight run over the Belgian paving (config/road.yaml: a sett paving on the
+  paper's ISO 8608 bed, G_d0 = 1e-4 m^3, w = 4) in the ride valve state (soft spring,
+  low damping); the design sets the soft gas volume and the low-damping dpsf.  Metrics
+  after ``settle_s``: BS 6841 W_b weighted RMS vertical acceleration at the driver and
+  rear passenger seats (full integration rate, 500 Hz).
 - handling: ISO 3888-1 double lane change at 65 km/h on a smooth road in the handling
   valve state (stiff spring, high damping); the design sets the stiff gas volume and the
   high-damping dpsf.  Preview steering driver (gains frozen in config/scenarios.yaml) and
