@@ -257,9 +257,22 @@ def _optimise(objective: str, n_vars: int, start: str, x0: ArrayLike | None,
                          constraint_gradients=gradients)
 
 
-def _feasible_f(run, gtol: float) -> float:
-    """The run's f if its final point is feasible (all g <= gtol), else +inf."""
-    return run.f if run.max_violation <= gtol else math.inf
+def best_iterate(runs: Sequence[Any], gtol: float) -> list[float]:
+    """The best feasible full-model iterate of some runs (their histories), as x.
+
+    On the sett paving the eq. 11 tyre-hop constraints are active and piecewise
+    constant in x, so a Dynamic-Q run may end on an infeasible iterate after passing
+    feasible ones: the design kept is the iterate with the lowest f among those with
+    every constraint (eq. 11 and the extra ones) within gtol, over every run given;
+    without any, the one with the smallest violation.
+    """
+    entries = [h for run in runs for h in run.history]
+    if not entries:
+        raise ValueError('no iterate recorded')
+    feasible = [h for h in entries if h['max_violation'] <= gtol]
+    if feasible:
+        return list(min(feasible, key=lambda h: h['f'])['x'])
+    return list(min(entries, key=lambda h: h['max_violation'])['x'])
 
 
 def run_pareto(out: Path, n_vars: int = 4, n_points: int | None = None, bags: bool = True,
@@ -313,13 +326,13 @@ def run_pareto(out: Path, n_vars: int = 4, n_points: int | None = None, bags: bo
             f'{run.iterations} iterations, {run.n_full_runs} full runs')
         return run
 
-    ends = {}
+    ends: dict[str, list[float]] = {}
     for objective, kind in (('ride', 'ride_optimum'), ('handling', 'handling_optimum')):
         tried = [optimise(f'{kind}_from_{start}', objective, start, None)
                  for start in END_POINT_STARTS]
-        ends[kind] = min(tried, key=lambda r: _feasible_f(r, gtol))
-    x_r = np.asarray(ends['ride_optimum'].x)
-    x_h = np.asarray(ends['handling_optimum'].x)
+        ends[kind] = best_iterate(tried, gtol)
+    x_r = np.asarray(ends['ride_optimum'])
+    x_h = np.asarray(ends['handling_optimum'])
     points = [DesignPoint('ride_optimum', 'ride_optimum', x_r.tolist()),
               DesignPoint('handling_optimum', 'handling_optimum', x_h.tolist()),
               DesignPoint('baseline', 'baseline', baseline_design(n_vars).tolist())]
@@ -331,12 +344,10 @@ def run_pareto(out: Path, n_vars: int = 4, n_points: int | None = None, bags: bo
         tried = [optimise(f'front_{k}_from_previous', 'ride', 'previous', previous, specs),
                  optimise(f'front_{k}_from_handling_optimum', 'ride', 'handling_optimum',
                           x_h, specs)]
-        best = min(tried, key=lambda r: _feasible_f(r, gtol))
-        if not math.isfinite(_feasible_f(best, gtol)):
-            best = min(tried, key=lambda r: r.max_violation)
-        previous = np.asarray(best.x)
+        best = best_iterate(tried, gtol)
+        previous = np.asarray(best)
         names = [name for name, run, _ in runs[-2:]]
-        points.append(DesignPoint(f'front_{k}', 'front', best.x, eps=float(eps), runs=names))
+        points.append(DesignPoint(f'front_{k}', 'front', best, eps=float(eps), runs=names))
     points[0].runs = [n for n, _, _ in runs if n.startswith('ride_optimum')]
     points[1].runs = [n for n, _, _ in runs if n.startswith('handling_optimum')]
     evaluate_points(points[3:], n_vars)
@@ -352,8 +363,8 @@ def run_pareto(out: Path, n_vars: int = 4, n_points: int | None = None, bags: bo
                           start.x, specs),
                  optimise('front_balanced_from_handling_optimum', 'ride', 'handling_optimum',
                           x_h, specs)]
-        chosen = min(tried, key=lambda r: _feasible_f(r, gtol))
-        points.append(DesignPoint('front_balanced', 'front', chosen.x, eps=eps_star,
+        chosen = best_iterate(tried, gtol)
+        points.append(DesignPoint('front_balanced', 'front', chosen, eps=eps_star,
                                   runs=[name for name, _, _ in runs[-2:]]))
         evaluate_points(points[-1:], n_vars)
         _fill_gaps(points)
@@ -596,8 +607,11 @@ scenario's eq. 11 tyre-hop constraints.  Interior points: minimise f_ride subjec
 f_hand <= eps (extra constraint from the handling scenario, gradient from its scaled
 simplified model), the handling run's eq. 11 constraints and the ride run's own, for
 eps evenly spaced inside (f_hand(x_h), f_hand(x_r)), each from two starts (the
-previous front point and x_h), the better feasible one kept; then one more point at the
-eps where the ride and handling gaps balance (interpolated between the sweep points).
+previous front point and x_h); of each point's two runs (and of the end points' two)
+the best feasible iterate is kept, as on the sett paving a run may end on an
+infeasible iterate after feasible ones (the tyre-hop constraints are active there);
+then one more point at the eps where the ride and handling gaps balance
+(interpolated between the sweep points).
 Every value in the tables is the full model's.  Designs whose tyres leave the road
 for longer than eq. 11 allows in either scenario (g > gtol = 1e-3) are not passive
 candidates, and points another point beats in both objectives are dropped.
