@@ -1,8 +1,8 @@
 """Optimise goals with extra constraints from other scenarios, through the graph.
 
-A goal asks to minimise f_ride subject to f_hand <= bound (the handling scenario's
-objective, gradient from its scaled simplified model) or to a handling metric (full-
-model central differences): at the optimum the extra constraint holds within the
+A goal asks to minimise f_hand subject to f_ride <= bound (the ride scenario's
+objective, gradient from its scaled simplified model) or to a ride metric (full-model
+central differences): at the optimum the extra constraint holds within the
 optimiser's tolerance, the result says which gradient each constraint used, and a bad
 specification is answered with an error while the coordinator keeps serving.
 """
@@ -15,9 +15,12 @@ pytestmark = pytest.mark.ros
 
 SAMPLES = 8  # eq. 25 samples per scenario: fewer than the paper's 30, same code path
 GTOL = 1e-3  # config/optimiser.yaml vehicle gtol: feasible when g <= 1e-3
-# f_hand of the unconstrained 2-variable ride optimum is about 1.8 and that of the
-# handling optimum about 0.43 (docs/pareto.md), so a bound of 1.2 is active.
-F_HAND_BOUND = 1.2
+# On the sett paving f_ride of the handling optimum (dpsf 3, 0.1 L) is about 0.36 and
+# that of the ride optimum about 0.11 (docs/pareto.md), so a bound of 0.2 is active.
+# (The handling objective is taken here: its eq. 11 constraints are inactive, whereas
+# the ride run's tyre-hop constraints, active and piecewise constant on the paving,
+# can leave a short run infeasible.)
+F_RIDE_BOUND = 0.2
 
 
 @pytest.fixture
@@ -59,7 +62,7 @@ def _goal(*constraints, **fields):
     from suspension_tuning_interfaces.action import Optimise
     from suspension_tuning_interfaces.msg import Constraint
 
-    fields = {'scenario': 'ride', 'n_vars': 2, 'gradient_source': 'simplified',
+    fields = {'scenario': 'handling', 'n_vars': 2, 'gradient_source': 'simplified',
               'max_iterations': 15, **fields}
     return Optimise.Goal(constraints=[Constraint(scenario=s, quantity=q, upper_bound=b)
                                       for s, q, b in constraints], **fields)
@@ -75,15 +78,15 @@ def test_a_constrained_goal_respects_its_extra_constraint_at_the_optimum(graph):
     from suspension_tuning.nodes.recorder import RecorderNode
 
     nodes, client_node = graph
-    result = _run(client_node, _goal(('handling', 'f_hand', F_HAND_BOUND)))
+    result = _run(client_node, _goal(('ride', 'f_ride', F_RIDE_BOUND)))
     assert result.success, result.message
     assert list(result.constraint_gradient_sources) == ['simplified']
-    # The handling scenario's full model at the optimum, in-process: within gtol of
-    # the bound, and the value the result reports.
-    f_hand = evaluation.evaluate('handling', np.asarray(result.x)[None, :]).f[0]
-    assert f_hand <= F_HAND_BOUND + GTOL
-    assert result.constraint_values[0] == pytest.approx(f_hand, abs=1e-12)
-    assert result.g[-1] == pytest.approx(f_hand - F_HAND_BOUND, abs=1e-12)
+    # The ride scenario's full model at the optimum, in-process: within gtol of the
+    # bound, and the value the result reports.
+    f_ride = evaluation.evaluate('ride', np.asarray(result.x)[None, :]).f[0]
+    assert f_ride <= F_RIDE_BOUND + GTOL
+    assert result.constraint_values[0] == pytest.approx(f_ride, abs=1e-12)
+    assert result.g[-1] == pytest.approx(f_ride - F_RIDE_BOUND, abs=1e-12)
     assert len(result.g) == 5  # 4 eq. 11 constraints, then the extra one
     # Both scenarios calibrated (eq. 25): SAMPLES full runs each.
     assert result.n_calibration_runs == 2 * SAMPLES
@@ -94,8 +97,8 @@ def test_a_constrained_goal_respects_its_extra_constraint_at_the_optimum(graph):
         time.sleep(0.05)
     contents = read_messages(recorder.session.closed_bags[0])
     config = yaml.safe_load(contents.metadata['run_config']['yaml'])
-    assert config['constraints'] == [{'scenario': 'handling', 'quantity': 'f',
-                                      'upper_bound': F_HAND_BOUND}]
+    assert config['constraints'] == [{'scenario': 'ride', 'quantity': 'f',
+                                      'upper_bound': F_RIDE_BOUND}]
     assert config['constraint_gradient_sources'] == ['simplified']
     recorded = decode(contents, contents.on('/optimisation/result')[0])
     assert list(recorded.constraint_values) == list(result.constraint_values)
@@ -112,12 +115,11 @@ def test_bad_constraints_are_answered_with_errors_and_the_coordinator_keeps_serv
         result = _run(client_node, _goal(spec))
         assert not result.success
         assert message in result.message, result.message
-    # Still serving: a metric constraint (first roll peak <= 5 deg in the lane change;
-    # the ride optimum rolls about 7.4 deg), its gradient from full-model differences.
-    result = _run(client_node, _goal(('handling', 'roll_first_peak_deg', 5.0),
-                                     max_iterations=10))
+    # Still serving: a metric constraint (driver seat W_b RMS <= 1.5 m/s^2 on the
+    # paving; the handling optimum gives about 1.9), gradient from full-model differences.
+    result = _run(client_node, _goal(('ride', 'a_rms_driver_mps2', 1.5), max_iterations=10))
     assert result.success, result.message
     assert list(result.constraint_gradient_sources) == ['full']
-    peak = evaluation.evaluate('handling', np.asarray(result.x)[None, :])
-    names = list(peak.metric_names)
-    assert peak.metrics[0, names.index('roll_first_peak_deg')] <= 5.0 + GTOL
+    ride = evaluation.evaluate('ride', np.asarray(result.x)[None, :])
+    names = list(ride.metric_names)
+    assert ride.metrics[0, names.index('a_rms_driver_mps2')] <= 1.5 + GTOL
