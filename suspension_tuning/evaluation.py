@@ -8,7 +8,7 @@ what is wrong (wrong length, NaN, out of bounds, unknown scenario).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,6 +22,27 @@ from suspension_tuning.vehicle.scenarios import ScenarioResult, run_scenario
 
 Array = NDArray[np.float64]
 TYRES = ('fl', 'fr', 'rl', 'rr')
+
+
+def _per_tyre(name: str) -> tuple[str, ...]:
+    return tuple(f'{name}_{tyre}' for tyre in TYRES)
+
+
+#: Metric names of each scenario as :func:`metric_table` flattens them (units in the
+#: names; per-tyre metrics split into ``_fl`` .. ``_rr``, pairs into ``_0``, ``_1``).
+#: What an extra constraint of the optimisation may bound (``tuning.ConstraintSpec``).
+METRIC_NAMES: dict[str, tuple[str, ...]] = {
+    'ride': ('a_rms_driver_mps2', 'a_rms_passenger_mps2', 'roll_rms_deg',
+             'roll_rate_rms_deg_s', *_per_tyre('tyre_lift_off_fraction'),
+             *_per_tyre('strut_stroke_max_m'), 'speed_mean_mps'),
+    'handling': ('roll_first_peak_deg', 'roll_rate_rms_deg_s', 'roll_max_deg',
+                 'lateral_accel_max_mps2', 'path_error_max_m', 'cone_violation_m',
+                 'steer_max_deg', *_per_tyre('tyre_lift_off_fraction'), 'speed_min_mps',
+                 't_first_lane_change_s_0', 't_first_lane_change_s_1', 't_manoeuvre_s_0',
+                 't_manoeuvre_s_1'),
+    'mixed': ('a_rms_driver_mps2', 'a_rms_passenger_mps2', 'roll_first_peak_deg',
+              'roll_rate_rms_deg_s', 'valve_switches', 'handling_state_fraction'),
+}
 
 
 @dataclass
@@ -115,3 +136,23 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
     names, table = metric_table(result.metrics, len(designs))
     return DesignEvaluation(f=np.asarray(result.f, float), g=np.asarray(result.g, float),
                             metric_names=names, metrics=table, result=result)
+
+
+def in_process_model(scenario: str) -> Callable[[Array], Any]:
+    """The full model of ``scenario`` in-process, as ``tuning.optimise`` calls it.
+
+    Returns a callable designs (m, n) -> ``tuning.FullEvaluation`` with the named
+    metrics (what extra constraints bound) and the scenario result as the simplified
+    model's inputs; 'mixed' runs with in-process valve controllers.
+    """
+    from suspension_tuning.tuning import FullEvaluation
+
+    if scenario not in scenarios():
+        raise ValueError(f'unknown scenario {scenario!r}; valid: {", ".join(scenarios())}')
+
+    def run(designs: Array) -> FullEvaluation:
+        result = evaluate(scenario, np.atleast_2d(np.asarray(designs, dtype=float)))
+        return FullEvaluation(f=result.f, g=result.g, inputs=result.result,
+                              metric_names=result.metric_names, metrics=result.metrics)
+
+    return run

@@ -17,7 +17,7 @@ from scipy.optimize import OptimizeResult
 
 from suspension_tuning import evaluation
 from suspension_tuning.inspect_bag import last_iteration
-from suspension_tuning.tuning import FullEvaluation, RunCounter, TuningRequest, optimise
+from suspension_tuning.tuning import RunCounter, TuningRequest, optimise
 
 
 def resume(bag: str | os.PathLike[str], max_iterations: int | None = None,
@@ -48,23 +48,26 @@ def resume(bag: str | os.PathLike[str], max_iterations: int | None = None,
     if max_iterations is not None:
         options['maxiter'] = int(max_iterations)
     request = TuningRequest(config['scenario'], int(config['n_vars']), config['x0'],
-                            config['gradient_source'], options, float(config['fd_step']))
+                            config['gradient_source'], options, float(config['fd_step']),
+                            config.get('constraints') or ())
     last = state['history'][-1]
     counter = RunCounter(full_runs=int(last['n_full_runs']),
                          simplified_runs=int(last['n_simplified_runs']))
 
-    def full_model(points):
-        run = evaluation.evaluate(request.scenario, points)
-        return FullEvaluation(run.f, run.g, run.result)
-
-    gradient = None
+    models = {name: evaluation.in_process_model(name)
+              for name in (request.scenario, *request.constraint_scenarios)}
+    gradients = {}
     if request.gradient_source == 'simplified':
         from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
 
         samples = (config.get('coordinator_parameters') or {}).get('calibration_samples')
-        scaling = calibrate(request.scenario, request.n_vars, n_samples=samples)
-        counter.calibration_runs = len(scaling.x_samples)
-        gradient = SimplifiedGradient(request.scenario, request.n_vars, scaling,
-                                      request.fd_step)
-    return optimise(request, full_model, gradient, callback, history=state['history'],
-                    counter=counter)
+        sources = request.constraint_gradient_sources()
+        for name in dict.fromkeys([request.scenario, *(
+                c.scenario for c, s in zip(request.constraints, sources) if s == 'simplified')]):
+            scaling = calibrate(name, request.n_vars, n_samples=samples)
+            counter.calibration_runs += len(scaling.x_samples)
+            gradients[name] = SimplifiedGradient(name, request.n_vars, scaling,
+                                                 request.fd_step)
+    return optimise(request, models[request.scenario], gradients.get(request.scenario),
+                    callback, history=state['history'], counter=counter,
+                    constraint_models=models, constraint_gradients=gradients)

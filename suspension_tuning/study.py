@@ -225,13 +225,17 @@ class FullModelCache:
 
 
 def full_model(scenario: str, n_vars: int) -> Callable[[Array], FullEvaluation]:
-    """The full model as :func:`suspension_tuning.tuning.optimise` wants it (in-process)."""
+    """The full model as :func:`suspension_tuning.tuning.optimise` wants it (in-process).
+
+    With the named metrics (``evaluation.metric_table``), which extra constraints may
+    bound; 'mixed' runs the closed-loop scenario with in-process valve controllers.
+    """
+    from suspension_tuning.evaluation import in_process_model
+
+    run = in_process_model(scenario)
 
     def evaluate(designs: Array) -> FullEvaluation:
-        result = run_scenario(scenario, designs, n_vars=n_vars)
-        return FullEvaluation(
-            f=np.asarray(result.f, float), g=np.asarray(result.g, float), inputs=result
-        )
+        return run(validate_design(designs, n_vars))
 
     return evaluate
 
@@ -292,6 +296,9 @@ def run_dynamic_q(
     calibration_wall_time_s: float = 0.0,
     options: dict[str, Any] | None = None,
     record: bool = True,
+    x0: ArrayLike | None = None,
+    constraints: Sequence[Any] = (),
+    constraint_gradients: dict[str, SimplifiedGradient] | None = None,
 ) -> tuple[StudyRun, _Recorder]:
     """Dynamic-Q through :func:`suspension_tuning.tuning.optimise` (the coordinator's loop).
 
@@ -312,10 +319,18 @@ def run_dynamic_q(
         Dynamic-Q options (default config/optimiser.yaml ``vehicle``).
     record : bool
         Collect the IterationRecord messages for a bag.
+    x0 : array_like, optional
+        Start design in place of the named ``start`` (which then only labels the run).
+    constraints : sequence, optional
+        Extra constraints (``tuning.ConstraintSpec``); their scenarios' full models run
+        in-process.
+    constraint_gradients : dict, optional
+        Simplified gradients of the constraints' other scenarios (simplified source).
     """
     options = vehicle_options() if options is None else options
+    start_x = start_point(start, n_vars) if x0 is None else validate_design(x0, n_vars)[0]
     request = TuningRequest(
-        scenario, n_vars, start_point(start, n_vars), gradient_source, options, FD_STEP
+        scenario, n_vars, start_x, gradient_source, options, FD_STEP, constraints
     )
     counter = RunCounter(calibration_runs=calibration_samples)
     recorder = _Recorder(record)
@@ -327,8 +342,10 @@ def run_dynamic_q(
         return False
 
     t0 = time.perf_counter()
+    models = {name: full_model(name, n_vars) for name in request.constraint_scenarios}
     result = optimise(
-        request, full_model(scenario, n_vars), gradient, on_iteration, counter=counter
+        request, full_model(scenario, n_vars), gradient, on_iteration, counter=counter,
+        constraint_models=models, constraint_gradients=constraint_gradients,
     )
     wall = time.perf_counter() - t0
     method = 'dq_simplified' if gradient_source == 'simplified' else 'dq_full'
@@ -353,6 +370,14 @@ def run_dynamic_q(
         history=history,
         details={'optimiser_options': options, 'fd_step': FD_STEP},
     )
+    if request.constraints:
+        run.details.update(
+            x0=request.start.tolist(),
+            constraints=result.constraints,
+            constraint_labels=[c.label for c in request.constraints],
+            constraint_values=result.constraint_values,
+            constraint_gradient_sources=result.constraint_gradient_sources,
+        )
     return run, recorder
 
 
@@ -1040,7 +1065,35 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="SLSQP forward-difference step, normalised (default SciPy's 1.49e-8)",
     )
     parser.add_argument('--no-bags', action='store_true', help='do not record bags')
+    parser.add_argument(
+        '--pareto',
+        action='store_true',
+        help='instead: the passive ride-handling Pareto front against the switched 4S4 '
+        '(suspension_tuning.studies.pareto; default output out/pareto)',
+    )
+    parser.add_argument(
+        '--pareto-n-vars', type=int, default=4, choices=N_VARS,
+        help='design variables of the Pareto study (default 4)',
+    )
+    parser.add_argument(
+        '--points', type=int, default=None,
+        help='epsilon values of the Pareto front (default 8)',
+    )
+    parser.add_argument(
+        '--pareto-samples', type=int, default=30,
+        help='eq. 25 calibration samples per scenario of the Pareto study (default 30)',
+    )
     args = parser.parse_args(argv)
+    if args.pareto:
+        from suspension_tuning.studies import pareto
+
+        if args.out == 'out/study':
+            args.out = 'out/pareto'
+        try:
+            return pareto.main(args)
+        except ValueError as error:
+            print(f'study: {error}', file=sys.stderr)
+            return 2
     grid = dict(QUICK_GRID_POINTS if args.quick else GRID_POINTS)
     if args.grid_2 is not None:
         grid[2] = args.grid_2

@@ -4,6 +4,10 @@ Usage::
 
     ros2 run suspension_tuning tune --scenario ride --n-vars 4 --gradient simplified
 
+Extra constraints from another scenario or a named metric::
+
+    tune --scenario ride --constraint 'handling:f_hand<=0.8'
+
 Prints the eq. 25 calibration's progress (full-model samples done of total; the first
 run of a model configuration spends them before its first iteration), then one line
 per Dynamic-Q iteration (iteration, f, largest violation, model runs so far) from the
@@ -24,8 +28,10 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from suspension_tuning_interfaces.action import Optimise
+from suspension_tuning_interfaces.msg import Constraint
 
 from suspension_tuning.nodes._spin import wait_future
+from suspension_tuning.tuning import ConstraintSpec
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
@@ -38,6 +44,10 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--gradient', default='simplified', help="'simplified' or 'full'")
     parser.add_argument('--max-iterations', type=int, default=0, help='0 = coordinator default')
     parser.add_argument('--move-limit', type=float, default=0.0, help='0 = coordinator default')
+    parser.add_argument('--constraint', action='append', default=[], metavar='SPEC',
+                        help="extra constraint '<scenario>:<quantity><=<bound>', e.g. "
+                        "'handling:f_hand<=0.8' or 'handling:roll_first_peak_deg<=4' "
+                        '(repeatable)')
     parser.add_argument('--action', default='/coordinator/optimise', help='action name')
     parser.add_argument('--server-timeout', type=float, default=30.0,
                         help='seconds to wait for the coordinator')
@@ -68,6 +78,9 @@ def format_result(result) -> str:
     lines = [f'success: {result.success}', f'message: {result.message}',
              f'f: {result.f:.6f}', 'x: [' + ', '.join(f'{v:.4f}' for v in result.x) + ']',
              'g: [' + ', '.join(f'{v:.4f}' for v in result.g) + ']',
+             *(f'constraint {i}: value {value:.6g} (gradient: {source})' for i, (value, source)
+               in enumerate(zip(result.constraint_values,
+                                result.constraint_gradient_sources))),
              f'iterations: {result.iterations}', f'full-model runs: {result.n_full_runs}',
              f'simplified-model runs: {result.n_simplified_runs}',
              f'calibration full-model runs: {result.n_calibration_runs}',
@@ -113,6 +126,11 @@ def main(argv: list[str] | None = None) -> int:
     args_list = sys.argv[1:] if argv is None else argv
     ros_args = rclpy.utilities.remove_ros_args(['tune', *args_list])[1:]
     args = parse_args(ros_args)
+    try:  # checked here too, so that a typo is reported before any ROS set-up
+        constraints = [ConstraintSpec.parse(text) for text in args.constraint]
+    except ValueError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
     # Without rclpy's signal handler: it would shut the context down on Ctrl-C, and the
     # cancel request could no longer be sent.  Ctrl-C raises KeyboardInterrupt here.
     rclpy.init(args=['tune', *args_list], signal_handler_options=SignalHandlerOptions.NO)
@@ -130,7 +148,10 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         goal = Optimise.Goal(scenario=args.scenario, n_vars=args.n_vars, x0=args.x0,
                              gradient_source=args.gradient,
-                             max_iterations=args.max_iterations, move_limit=args.move_limit)
+                             max_iterations=args.max_iterations, move_limit=args.move_limit,
+                             constraints=[Constraint(scenario=c.scenario, quantity=c.quantity,
+                                                     upper_bound=c.upper_bound)
+                                          for c in constraints])
         sending = client.send_goal_async(
             goal, feedback_callback=lambda fb: print(format_feedback(fb.feedback),
                                                      flush=True))

@@ -12,6 +12,15 @@ callables, so the same loop runs in-process (physics called directly) and in the
 coordinator (physics called through services on simulation workers and the gradient
 evaluator).  It counts full-model and simplified-model runs in one place
 (:class:`RunCounter`), like scipy's ``ScalarFunction`` counts ``nfev``.
+
+Extra inequality constraints (:class:`ConstraintSpec`) bound a quantity of any
+scenario's full-model run at the same design: another scenario's objective (minimise
+f_ride subject to f_hand <= 0.8), its eq. 11 tyre-hop constraints, or a named metric
+(roll_first_peak_deg <= 4 in the lane change).  Each becomes ``value - bound <= 0``
+after the scenario's own eq. 11 constraints.  Their gradients come from the eq.
+25-scaled simplified model of their scenario where one exists (the objective and the
+tyre-hop constraints of 'ride' and 'handling') and from full-model central differences
+otherwise (named metrics, the 'mixed' scenario); the result says which per constraint.
 """
 
 from __future__ import annotations
@@ -40,6 +49,15 @@ Array = NDArray[np.float64]
 GRADIENT_SOURCES = ('simplified', 'full')
 #: Scenarios that can be optimised (the mixed scenario is a closed-loop check only).
 OPTIMISATION_SCENARIOS = ('ride', 'handling')
+#: Scenarios whose full-model run can give an extra constraint.
+CONSTRAINT_SCENARIOS = ('ride', 'handling', 'mixed')
+#: Names of each scenario's objective in a constraint (besides 'f'): eqs. 9 and 10,
+#: and the mixed scenario's mean of the two.
+OBJECTIVE_NAMES = {'ride': 'f_ride', 'handling': 'f_hand', 'mixed': 'f_mixed'}
+#: Names of the eq. 11 tyre-hop constraints in a constraint (FL, FR, RL, RR).
+TYRE_HOP_NAMES = ('g_fl', 'g_fr', 'g_rl', 'g_rr')
+#: Scenarios with an eq. 25-scaled simplified model of f and g (paper section 6).
+SIMPLIFIED_SCENARIOS = ('ride', 'handling')
 
 
 @dataclass
@@ -56,11 +74,18 @@ class FullEvaluation:
         What the simplified model of this scenario needs from the full model's run of
         the first design (steering and slip angles for handling); passed through to
         the simplified gradient unchanged.
+    metric_names : sequence of str
+        Names of the metric columns (``evaluation.metric_table``); needed only when a
+        constraint bounds a named metric of this scenario.
+    metrics : ndarray, shape (m, len(metric_names)), optional
+        Metric values.
     """
 
     f: Array
     g: Array
     inputs: Any = None
+    metric_names: Sequence[str] = ()
+    metrics: Array | None = None
 
 
 #: Full model on a batch: designs (m, n) -> FullEvaluation.
@@ -84,6 +109,132 @@ class RunCounter:
 
 
 @dataclass(frozen=True)
+class ConstraintSpec:
+    """An extra inequality constraint: ``quantity(scenario's run at x) <= upper_bound``.
+
+    Parameters
+    ----------
+    scenario : str
+        'ride', 'handling' or 'mixed' (:data:`CONSTRAINT_SCENARIOS`).
+    quantity : str
+        'f' or the scenario's objective name (:data:`OBJECTIVE_NAMES`), an eq. 11
+        tyre-hop constraint (:data:`TYRE_HOP_NAMES`) or a metric name of the scenario
+        (``evaluation.METRIC_NAMES``, with its unit in the name).
+    upper_bound : float
+        Upper bound in the quantity's units.
+
+    Raises
+    ------
+    ValueError
+        Unknown scenario or quantity, or a bound that is not a finite number.
+    """
+
+    scenario: str
+    quantity: str
+    upper_bound: float
+
+    def __post_init__(self) -> None:
+        """Validate the fields; the objective's name is stored as 'f'."""
+        from suspension_tuning.evaluation import METRIC_NAMES
+
+        if self.scenario not in CONSTRAINT_SCENARIOS:
+            raise ValueError(f'constraint: unknown scenario {self.scenario!r}; '
+                             f'valid: {", ".join(CONSTRAINT_SCENARIOS)}')
+        quantity = 'f' if self.quantity == OBJECTIVE_NAMES[self.scenario] else self.quantity
+        valid = ('f', OBJECTIVE_NAMES[self.scenario], *TYRE_HOP_NAMES,
+                 *METRIC_NAMES[self.scenario])
+        if quantity not in valid:
+            raise ValueError(f'constraint: unknown metric {self.quantity!r} of scenario '
+                             f'{self.scenario!r}; valid: {", ".join(valid)}')
+        try:
+            bound = float(self.upper_bound)
+        except (TypeError, ValueError):
+            raise ValueError(f'constraint {self.scenario}:{self.quantity}: the upper bound '
+                             f'must be a number, got {self.upper_bound!r}') from None
+        if not np.isfinite(bound):
+            raise ValueError(f'constraint {self.scenario}:{self.quantity}: the upper bound '
+                             f'must be finite, got {bound}')
+        object.__setattr__(self, 'quantity', quantity)
+        object.__setattr__(self, 'upper_bound', bound)
+
+    @classmethod
+    def parse(cls, text: str) -> ConstraintSpec:
+        """Read ``'<scenario>:<quantity><=<bound>'``, e.g. ``'handling:f_hand<=0.8'``."""
+        head, sep, bound = str(text).partition('<=')
+        scenario, colon, quantity = head.partition(':')
+        if not sep or not colon:
+            raise ValueError(f"constraint {text!r}: expected '<scenario>:<quantity><=<bound>', "
+                             "e.g. 'handling:f_hand<=0.8'")
+        try:
+            value = float(bound)
+        except ValueError:
+            raise ValueError(f'constraint {text!r}: the upper bound {bound.strip()!r} is not '
+                             f'a number') from None
+        return cls(scenario.strip(), quantity.strip(), value)
+
+    @classmethod
+    def coerce(cls, spec: Any) -> ConstraintSpec:
+        """A ConstraintSpec from itself, a ``'s:q<=b'`` string, a mapping or a 3-sequence."""
+        if isinstance(spec, ConstraintSpec):
+            return spec
+        if isinstance(spec, str):
+            return cls.parse(spec)
+        if isinstance(spec, Mapping):
+            try:
+                return cls(spec['scenario'], spec['quantity'], spec['upper_bound'])
+            except KeyError as missing:
+                raise ValueError(f'constraint {dict(spec)!r} has no {missing}') from None
+        if isinstance(spec, Sequence) and len(spec) == 3:
+            return cls(*spec)
+        raise ValueError(f'cannot read a constraint from {spec!r}: give (scenario, quantity, '
+                         "upper bound) or '<scenario>:<quantity><=<bound>'")
+
+    @property
+    def has_simplified_model(self) -> bool:
+        """Whether an eq. 25-scaled simplified model gives this quantity's gradient."""
+        return self.scenario in SIMPLIFIED_SCENARIOS and (
+            self.quantity == 'f' or self.quantity in TYRE_HOP_NAMES)
+
+    @property
+    def label(self) -> str:
+        """``'<scenario>:<quantity><=<bound>'`` (the objective by its name)."""
+        name = OBJECTIVE_NAMES[self.scenario] if self.quantity == 'f' else self.quantity
+        return f'{self.scenario}:{name}<={self.upper_bound:g}'
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain dict of the three fields (JSON, run configurations)."""
+        return {'scenario': self.scenario, 'quantity': self.quantity,
+                'upper_bound': self.upper_bound}
+
+    def values(self, evaluation: FullEvaluation) -> Array:
+        """The quantity of every design of a full evaluation of its scenario, (m,)."""
+        if self.quantity == 'f':
+            return np.asarray(evaluation.f, float)
+        if self.quantity in TYRE_HOP_NAMES:
+            return np.asarray(evaluation.g, float)[:, TYRE_HOP_NAMES.index(self.quantity)]
+        names = list(evaluation.metric_names)
+        if self.quantity not in names or evaluation.metrics is None:
+            raise ValueError(f'constraint {self.label}: the {self.scenario} full model '
+                             f'returned no metric {self.quantity!r}')
+        return np.asarray(evaluation.metrics, float)[:, names.index(self.quantity)]
+
+    def derivative(self, df: Array, dg: Array) -> Array:
+        """The quantity's row of a simplified gradient ``(df (n,), dg (4, n))``."""
+        if self.quantity == 'f':
+            return np.asarray(df, float)
+        return np.asarray(dg, float)[TYRE_HOP_NAMES.index(self.quantity)]
+
+
+def constraint_specs(specs: Sequence[Any] | None) -> tuple[ConstraintSpec, ...]:
+    """Validate a list of constraint specifications (see :meth:`ConstraintSpec.coerce`)."""
+    if specs is None:
+        return ()
+    if isinstance(specs, (str, Mapping)):
+        specs = [specs]
+    return tuple(ConstraintSpec.coerce(spec) for spec in specs)
+
+
+@dataclass(frozen=True)
 class TuningRequest:
     """What to optimise (the Optimise action's goal, validated).
 
@@ -101,6 +252,9 @@ class TuningRequest:
         Dynamic-Q options (see :class:`DynamicQOptions`).
     fd_step : float
         Central-difference half step of full-model gradients, normalised units.
+    constraints : sequence, optional
+        Extra inequality constraints (:class:`ConstraintSpec`, or anything
+        :meth:`ConstraintSpec.coerce` reads), after the eq. 11 constraints in g.
     """
 
     scenario: str
@@ -109,6 +263,7 @@ class TuningRequest:
     gradient_source: str = 'simplified'
     options: Mapping[str, Any] | None = None
     fd_step: float = 0.025
+    constraints: Sequence[Any] = ()
     start: Array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -126,6 +281,18 @@ class TuningRequest:
         x0 = centre(self.n_vars) if self.x0 is None or len(self.x0) == 0 else self.x0
         object.__setattr__(self, 'start', validate_design(x0, self.n_vars)[0])
         DynamicQOptions.from_mapping(self.options)
+        object.__setattr__(self, 'constraints', constraint_specs(self.constraints))
+
+    @property
+    def constraint_scenarios(self) -> tuple[str, ...]:
+        """Scenarios other than the objective's that the constraints need, in order."""
+        names = [c.scenario for c in self.constraints if c.scenario != self.scenario]
+        return tuple(dict.fromkeys(names))
+
+    def constraint_gradient_sources(self) -> list[str]:
+        """Per extra constraint: 'simplified' or 'full' (central differences)."""
+        return ['simplified' if self.gradient_source == 'simplified'
+                and c.has_simplified_model else 'full' for c in self.constraints]
 
 
 def physical_settings(x: ArrayLike) -> dict[str, float]:
@@ -157,13 +324,17 @@ def optimise(request: TuningRequest, full_model: FullModel,
              simplified_gradient: SimplifiedGradient | None = None,
              callback: Callable[[dict[str, Any], RunCounter], bool | None] | None = None,
              history: Sequence[Mapping[str, Any]] | None = None,
-             counter: RunCounter | None = None) -> OptimizeResult:
+             counter: RunCounter | None = None,
+             constraint_models: Mapping[str, FullModel] | None = None,
+             constraint_gradients: Mapping[str, SimplifiedGradient] | None = None
+             ) -> OptimizeResult:
     """Run Dynamic-Q on the full model with the requested gradient source.
 
     Parameters
     ----------
     request : TuningRequest
-        Scenario, number of variables, start point, gradient source, options.
+        Scenario, number of variables, start point, gradient source, options and the
+        extra constraints.
     full_model : callable
         Designs (m, n) -> :class:`FullEvaluation`; called with one design per
         iteration, and with the 2n central-difference designs when the gradient
@@ -178,49 +349,166 @@ def optimise(request: TuningRequest, full_model: FullModel,
         Records of an earlier run to resume from (``result.history``).
     counter : RunCounter, optional
         Counter to continue (e.g. one that holds the calibration runs).
+    constraint_models : mapping, optional
+        Scenario name -> full model of that scenario, for every scenario of the extra
+        constraints other than the objective's (``request.constraint_scenarios``).
+    constraint_gradients : mapping, optional
+        Scenario name -> simplified gradient of that scenario, for every other scenario
+        of an extra constraint with a simplified model, when the gradient source is
+        'simplified'.
 
     Returns
     -------
     scipy.optimize.OptimizeResult
         Dynamic-Q's result plus ``n_full_runs``, ``n_simplified_runs``,
-        ``n_calibration_runs`` and ``scenario``, ``n_vars``, ``gradient_source``.
+        ``n_calibration_runs`` and ``scenario``, ``n_vars``, ``gradient_source``;
+        ``constraints`` (the extra constraints as dicts), ``constraint_values`` (their
+        quantities at x, in their units) and ``constraint_gradient_sources``
+        ('simplified' or 'full' each).  ``g`` holds the eq. 11 constraints, then
+        ``value - bound`` of each extra constraint.
     """
     if request.gradient_source == 'simplified' and simplified_gradient is None:
         raise ValueError("gradient source 'simplified' needs a simplified_gradient")
     counter = counter or RunCounter()
+    terms = _ConstraintTerms(request, full_model, simplified_gradient, constraint_models,
+                             constraint_gradients, counter)
     n = request.n_vars
     lower, upper = np.full(n, X_LOWER), np.full(n, X_UPPER)
     opt = DynamicQ(request.start, lower, upper, request.options, history=history,
                    gradient_source=request.gradient_source)
-    inputs = None
     while (ask := opt.ask()) is not None:
         kind, x = ask
         if kind == 'evaluate':
-            evaluation = full_model(x[None, :])
-            counter.full_runs += 1
-            inputs = evaluation.inputs
-            record = opt.tell((float(evaluation.f[0]), evaluation.g[0], None))
+            f, g = terms.evaluate(x)
+            record = opt.tell((f, g, None))
         elif request.gradient_source == 'full':
             def values(points: Array) -> Array:
-                batch = full_model(points)
-                counter.full_runs += len(points)
-                return np.column_stack([batch.f, batch.g])
+                return terms.stacked_values(points)
 
             jac = central_difference(values, x, request.fd_step, lower, upper)
             record = opt.tell((jac[0], jac[1:], None), source='full')
         else:
-            if inputs is None and request.scenario == 'handling':
-                # Resumed from a history: the simplified handling model needs the full
-                # model's steering and slip angles at x (paper 6.1), so run it once.
-                inputs = full_model(x[None, :]).inputs
-                counter.full_runs += 1
-            df, dg = simplified_gradient(x, inputs)
-            counter.simplified_runs += 2 * n
-            record = opt.tell((np.asarray(df, float), np.asarray(dg, float), None),
-                              source='simplified')
+            df, dg = terms.simplified_gradient(x, lower, upper)
+            record = opt.tell((df, dg, None), source='simplified')
         if record is not None and callback is not None and callback(record, counter):
             opt.stop('cancelled')
     result = opt.result()
+    k = len(request.constraints)
+    extra = np.asarray(result.g, float)[len(result.g) - k:] if k else np.zeros(0)
     result.update(counter.as_dict(), scenario=request.scenario, n_vars=n,
-                  gradient_source=request.gradient_source)
+                  gradient_source=request.gradient_source,
+                  constraints=[c.as_dict() for c in request.constraints],
+                  constraint_values=[float(v + c.upper_bound)
+                                     for v, c in zip(extra, request.constraints)],
+                  constraint_gradient_sources=request.constraint_gradient_sources())
     return result
+
+
+class _ConstraintTerms:
+    """The objective's scenario plus the extra constraints' scenarios at one design.
+
+    Runs every scenario the constraints need once per evaluation (one full run each),
+    keeps the full model's inputs per scenario for the simplified models, and builds
+    the gradients: simplified-model rows where a term has a simplified model, one
+    batch of 2n full-model central-difference runs per scenario for the others.
+    """
+
+    def __init__(self, request: TuningRequest, full_model: FullModel,
+                 simplified_gradient: SimplifiedGradient | None,
+                 models: Mapping[str, FullModel] | None,
+                 gradients: Mapping[str, SimplifiedGradient] | None,
+                 counter: RunCounter) -> None:
+        self.request = request
+        self.counter = counter
+        self.models: dict[str, FullModel] = {request.scenario: full_model}
+        self.gradients: dict[str, SimplifiedGradient | None] = {
+            request.scenario: simplified_gradient}
+        for name in request.constraint_scenarios:
+            model = (models or {}).get(name)
+            if model is None:
+                raise ValueError(f'a constraint on scenario {name!r} needs its full model '
+                                 f'(constraint_models[{name!r}])')
+            self.models[name] = model
+        sources = request.constraint_gradient_sources()
+        for spec, source in zip(request.constraints, sources):
+            if source == 'simplified' and spec.scenario not in self.gradients:
+                gradient = (gradients or {}).get(spec.scenario)
+                if gradient is None:
+                    raise ValueError(f'the constraint {spec.label} needs the simplified '
+                                     f'gradient of {spec.scenario!r} '
+                                     f'(constraint_gradients[{spec.scenario!r}])')
+                self.gradients[spec.scenario] = gradient
+        self.sources = sources
+        self.inputs: dict[str, Any] = {}
+
+    def _run(self, scenario: str, points: Array) -> FullEvaluation:
+        evaluation = self.models[scenario](points)
+        self.counter.full_runs += len(points)
+        return evaluation
+
+    def _constraint_values(self, runs: Mapping[str, FullEvaluation]) -> Array:
+        columns = [spec.values(runs[spec.scenario]) - spec.upper_bound
+                   for spec in self.request.constraints]
+        m = len(runs[self.request.scenario].f)
+        return np.column_stack(columns) if columns else np.zeros((m, 0))
+
+    def evaluate(self, x: Array) -> tuple[float, Array]:
+        """Objective and all constraints at x (one full run per scenario)."""
+        runs = {name: self._run(name, x[None, :]) for name in self.models}
+        for name, run in runs.items():
+            self.inputs[name] = run.inputs
+        primary = runs[self.request.scenario]
+        g = np.concatenate([np.asarray(primary.g[0], float), self._constraint_values(runs)[0]])
+        return float(primary.f[0]), g
+
+    def stacked_values(self, points: Array) -> Array:
+        """Columns f, g (eq. 11 then extra) of every point (full model, every scenario)."""
+        runs = {name: self._run(name, points) for name in self.models}
+        primary = runs[self.request.scenario]
+        return np.column_stack([primary.f, primary.g, self._constraint_values(runs)])
+
+    def _inputs(self, scenario: str, x: Array) -> Any:
+        if self.inputs.get(scenario) is None and scenario == 'handling':
+            # Resumed from a history: the simplified handling model needs the full
+            # model's steering and slip angles at x (paper 6.1), so run it once.
+            self.inputs[scenario] = self._run(scenario, x[None, :]).inputs
+        return self.inputs.get(scenario)
+
+    def _simplified(self, scenario: str, x: Array) -> tuple[Array, Array]:
+        gradient = self.gradients[scenario]
+        assert gradient is not None
+        df, dg = gradient(x, self._inputs(scenario, x))
+        self.counter.simplified_runs += 2 * self.request.n_vars
+        return np.asarray(df, float), np.asarray(dg, float)
+
+    def simplified_gradient(self, x: Array, lower: Array, upper: Array
+                            ) -> tuple[Array, Array]:
+        """Gradient of f and Jacobian of g: simplified rows where possible, else full."""
+        request = self.request
+        simplified = {request.scenario: self._simplified(request.scenario, x)}
+        df, dg = simplified[request.scenario]
+        rows: list[Array | None] = []
+        for spec, source in zip(request.constraints, self.sources):
+            if source == 'simplified':
+                if spec.scenario not in simplified:
+                    simplified[spec.scenario] = self._simplified(spec.scenario, x)
+                rows.append(spec.derivative(*simplified[spec.scenario]))
+            else:
+                rows.append(None)
+        full_terms = [i for i, row in enumerate(rows) if row is None]
+        by_scenario: dict[str, list[int]] = {}
+        for i in full_terms:
+            by_scenario.setdefault(request.constraints[i].scenario, []).append(i)
+        for scenario, indices in by_scenario.items():
+            specs = [request.constraints[i] for i in indices]
+
+            def values(points: Array, scenario: str = scenario,
+                       specs: list[ConstraintSpec] = specs) -> Array:
+                run = self._run(scenario, points)
+                return np.column_stack([spec.values(run) for spec in specs])
+
+            jac = central_difference(values, x, request.fd_step, lower, upper)
+            for i, row in zip(indices, jac):
+                rows[i] = row
+        extra = np.array(rows, dtype=float).reshape(len(rows), request.n_vars)
+        return df, np.vstack([np.asarray(dg, float).reshape(-1, request.n_vars), extra])

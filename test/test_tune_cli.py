@@ -11,13 +11,18 @@ from rclpy.parameter import Parameter
 pytestmark = pytest.mark.ros
 
 
-def test_tune_prints_progress_and_the_physical_optimum(ros_context, executor):
+def _serve_coordinator(ros_context, executor) -> None:
+    """A simulation worker and a coordinator (no telemetry run), spun by ``executor``."""
     from suspension_tuning.nodes.coordinator import CoordinatorNode
     from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
 
     executor.add(FullVehicleSimNode(context=ros_context),
                  CoordinatorNode(context=ros_context, parameter_overrides=[
                      Parameter('final_telemetry', value=False)]))
+
+
+def test_tune_prints_progress_and_the_physical_optimum(ros_context, executor):
+    _serve_coordinator(ros_context, executor)
     tune = Path(sys.prefix) / 'bin' / 'tune'
     run = subprocess.run([str(tune), '--scenario', 'handling', '--n-vars', '2',
                           '--gradient', 'full', '--max-iterations', '2'],
@@ -27,6 +32,27 @@ def test_tune_prints_progress_and_the_physical_optimum(ros_context, executor):
     assert 'optimum in physical units' in out
     assert 'gas_volume_front_l' in out and 'dpsf_front' in out
     assert 'full-model runs:' in out
+
+
+def test_tune_sends_constraints_from_the_command_line(ros_context, executor):
+    _serve_coordinator(ros_context, executor)
+    tune = Path(sys.prefix) / 'bin' / 'tune'
+    run = subprocess.run([str(tune), '--scenario', 'ride', '--gradient', 'full',
+                          '--max-iterations', '2', '--constraint', 'handling:f_hand<=1.2',
+                          '--constraint', 'handling:roll_first_peak_deg<=5'],
+                         capture_output=True, text=True, timeout=300, env=os.environ.copy())
+    assert run.returncode in (0, 1), run.stderr  # 2 iterations may stop unconverged
+    # Full-model gradients were asked for: every term is differenced on the full model.
+    assert 'constraint 0: value' in run.stdout and '(gradient: full)' in run.stdout
+    assert 'constraint 1: value' in run.stdout, run.stdout + run.stderr
+
+
+def test_tune_rejects_a_malformed_constraint_before_sending_a_goal():
+    tune = Path(sys.prefix) / 'bin' / 'tune'
+    run = subprocess.run([str(tune), '--constraint', 'handling:f_hand<0.8'],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2
+    assert "expected '<scenario>:<quantity><=<bound>'" in run.stderr
 
 
 def test_tune_prints_the_calibration_progress_before_the_first_iteration(start_tuning_graph):

@@ -85,3 +85,100 @@ def test_physical_settings_use_litres_at_the_edge():
     assert low['dpsf_front'] == pytest.approx(0.1029)
     assert low['gas_volume_front_l'] == pytest.approx(0.1005)
     assert low['gas_volume_rear_l'] == pytest.approx(0.35)
+
+
+# ---- extra constraints from other scenarios and metrics ---------------------------------
+def other_scenario_model(points):
+    # A second scenario: its objective f = x1 + x2 and a metric 'roll_first_peak_deg'
+    # = 10 (x1 + x2); no eq. 11 constraint is active (g = -1).
+    points = np.atleast_2d(points)
+    s = points[:, 0] + points[:, 1]
+    return FullEvaluation(f=s, g=-np.ones((len(points), 4)), inputs={'x': points[0].copy()},
+                          metric_names=['roll_first_peak_deg'], metrics=(10.0 * s)[:, None])
+
+
+def other_scenario_gradient(x, inputs):
+    np.testing.assert_array_equal(inputs['x'], x)  # the other scenario's own full run at x
+    return np.array([1.0, 1.0]), np.zeros((4, 2))
+
+
+def unconstrained_model(points):
+    points = np.atleast_2d(points)
+    return FullEvaluation(f=np.sum((points - TARGET) ** 2, axis=1),
+                          g=-np.ones((len(points), 4)), inputs={'x': points[0].copy()})
+
+
+def unconstrained_gradient(x, inputs):
+    return 2.0 * (x - TARGET), np.zeros((4, 2))
+
+
+@pytest.mark.parametrize('spec, source', [
+    # f_hand <= 0.8 has the scenario's simplified model; the metric has none.
+    (('handling', 'f_hand', 0.8), 'simplified'),
+    (('handling', 'roll_first_peak_deg', 8.0), 'full'),
+])
+def test_a_constraint_from_another_scenario_is_respected_at_the_optimum(spec, source):
+    # min |x - (0.3, 0.7)|^2 s.t. x1 + x2 <= 0.8 (through the other scenario): the
+    # projection x* = (0.2, 0.6) of the single-scenario test above (hand calculation).
+    request = TuningRequest('ride', 2, gradient_source='simplified', options=OPTIONS,
+                            constraints=[spec])
+    result = optimise(request, unconstrained_model, unconstrained_gradient,
+                      constraint_models={'handling': other_scenario_model},
+                      constraint_gradients={'handling': other_scenario_gradient})
+    np.testing.assert_allclose(result.x, X_STAR, rtol=1e-4)
+    assert result.constraint_gradient_sources == [source]
+    assert result.constraints == [{'scenario': 'handling', 'quantity': spec[1].replace(
+        'f_hand', 'f'), 'upper_bound': spec[2]}]
+    # The constraint is active: its value sits at its bound, g = value - bound = 0.
+    assert result.constraint_values[0] == pytest.approx(spec[2], abs=1e-6)
+    assert len(result.g) == 5  # 4 eq. 11 constraints, then the extra one
+    n, ngev = 2, result.ngev_by_source['simplified']
+    # Per evaluation one full run of each scenario; a metric without a simplified model
+    # adds 2n full central-difference runs of its scenario per gradient.
+    extra = 2 * n * ngev if source == 'full' else 0
+    assert result.n_full_runs == 2 * result.nfev + extra
+    simplified_calls = 2 if source == 'simplified' else 1
+    assert result.n_simplified_runs == simplified_calls * 2 * n * ngev
+
+
+def test_full_gradients_difference_every_scenario_of_the_constraints():
+    request = TuningRequest('ride', 2, gradient_source='full', options=OPTIONS,
+                            constraints=['handling:f_hand<=0.8'])
+    result = optimise(request, unconstrained_model,
+                      constraint_models={'handling': other_scenario_model})
+    np.testing.assert_allclose(result.x, X_STAR, rtol=1e-4)  # as above
+    assert result.constraint_gradient_sources == ['full']
+    n, ngev = 2, result.ngev_by_source['full']
+    assert result.n_full_runs == 2 * (result.nfev + 2 * n * ngev)  # both scenarios
+
+
+@pytest.mark.parametrize('spec, message', [
+    (('offroad', 'f', 0.8), 'unknown scenario'),
+    (('handling', 'roll_peak', 4.0), 'unknown metric'),
+    (('ride', 'roll_first_peak_deg', 4.0), 'unknown metric'),  # a handling metric
+    (('handling', 'f_hand', float('nan')), 'finite'),
+    (('handling', 'f_hand', 'high'), 'number'),
+    ('handling:f_hand<0.8', 'expected'),
+    ('handling:f_hand<=abc', 'not a number'),
+    ({'scenario': 'handling', 'quantity': 'f'}, 'upper_bound'),
+])
+def test_bad_constraint_specifications_are_rejected_with_clear_messages(spec, message):
+    with pytest.raises(ValueError, match=message):
+        TuningRequest('ride', 2, constraints=[spec])
+
+
+def test_constraint_text_names_the_objective_and_is_read_back():
+    from suspension_tuning.tuning import ConstraintSpec
+
+    spec = ConstraintSpec.parse('handling: f_hand <= 0.8')
+    assert (spec.scenario, spec.quantity, spec.upper_bound) == ('handling', 'f', 0.8)
+    assert spec.label == 'handling:f_hand<=0.8'
+    assert ConstraintSpec.parse(spec.label) == spec
+    assert ConstraintSpec.parse('mixed:valve_switches<=4').has_simplified_model is False
+    assert ConstraintSpec.parse('ride:g_fl<=0').has_simplified_model is True
+
+
+def test_a_constraint_scenario_without_a_model_is_an_error():
+    request = TuningRequest('ride', 2, gradient_source='full', constraints=['mixed:f<=1'])
+    with pytest.raises(ValueError, match='needs its full model'):
+        optimise(request, unconstrained_model)

@@ -1,11 +1,14 @@
 """ROS 2 node ``coordinator``: the Dynamic-Q optimisation as an action server.
 
 Action ``~/optimise`` (Optimise): scenario, 2 or 4 variables, start point, gradient
-source 'simplified' or 'full', limits.  Each iteration asks the simulation workers
-(``/<worker>/evaluate``) for the full-model objective and constraints and the
-gradient evaluator (``<gradient_node>/gradient``) for the scaled simplified-model
-gradient, or the workers for 2n full-model central differences.  Before a run with
-simplified gradients the gradient evaluator is calibrated (eq. 25, ``calibrate``).
+source 'simplified' or 'full', limits, and extra constraints on another scenario's
+objective or any named metric (``tuning.ConstraintSpec``; their scenarios run on the
+same workers, their simplified gradients on the same gradient evaluator).  Each
+iteration asks the simulation workers (``/<worker>/evaluate``) for the full-model
+objective and constraints and the gradient evaluator (``<gradient_node>/gradient``)
+for the scaled simplified-model gradient, or the workers for 2n full-model central
+differences.  Before a run with simplified gradients the gradient evaluator is
+calibrated (eq. 25, ``calibrate``) for every scenario with simplified terms.
 
 Feedback every iteration; the result holds the optimum (also in physical units), the
 history and the full-model, simplified-model and calibration run counts.  The run's
@@ -136,7 +139,8 @@ class CoordinatorNode(Node):
         self.calibrate_client = self.create_client(Calibrate, f'{gradient_node}/calibrate',
                                                    callback_group=clients)
         # A calibration's progress, passed on as the calibrating goal's feedback.
-        self._calibrating: tuple[Any, TuningRequest] | None = None
+        # (goal handle, scenario, n_vars) of the calibration under way.
+        self._calibrating: tuple[Any, str, int] | None = None
         self.create_subscription(CalibrationProgress, f'{gradient_node}/calibration_progress',
                                  self._on_calibration_progress, 100, callback_group=clients)
         config = str(self.get_parameter('optimiser_config').value) or str(
@@ -184,15 +188,18 @@ class CoordinatorNode(Node):
             options['maxiter'] = int(goal.max_iterations)
         if goal.move_limit:
             options['rho0'] = float(goal.move_limit)
+        constraints = [(c.scenario, c.quantity, c.upper_bound) for c in goal.constraints]
         return TuningRequest(goal.scenario, int(goal.n_vars), list(goal.x0) or None,
                              goal.gradient_source or 'simplified', options,
-                             float(self.get_parameter('fd_step').value))
+                             float(self.get_parameter('fd_step').value), constraints)
 
     def _publish_run_config(self, request: TuningRequest) -> None:
         config = {
             'scenario': request.scenario, 'n_vars': request.n_vars,
             'x0': request.start.tolist(), 'gradient_source': request.gradient_source,
             'optimiser_options': request.options, 'fd_step': request.fd_step,
+            'constraints': [c.as_dict() for c in request.constraints],
+            'constraint_gradient_sources': request.constraint_gradient_sources(),
             'coordinator_parameters': {name: p.value for name, p in
                                        self.get_parameters_by_prefix('').items()},
             'simulation_models': self._worker_models(),
@@ -208,25 +215,35 @@ class CoordinatorNode(Node):
             time.sleep(0.02)  # the subscriptions are served by the node's executor
         return {n: self.worker_models.get(n, 'no model description received') for n in names}
 
-    def _full_model(self, request: TuningRequest):
+    def _full_model(self, request: TuningRequest, scenario: str | None = None):
+        """The full model of ``scenario`` (default the objective's) on the workers."""
+        scenario = scenario or request.scenario
+
         def evaluate(designs: np.ndarray) -> FullEvaluation:
             # The simplified handling model runs on the inputs of the full run at x
             # (simplified_inputs.py); the ride model needs none.
             responses = self.pool.evaluate(
-                request.scenario, request.n_vars, designs,
+                scenario, request.n_vars, designs,
                 return_inputs=(request.gradient_source == 'simplified' and len(designs) == 1
-                               and request.scenario == 'handling'))
+                               and scenario == 'handling'))
             f = np.concatenate([np.asarray(r.f, float) for r in responses])
             g = np.concatenate([np.asarray(r.g, float).reshape(r.n_designs, r.n_constraints)
                                 for r in responses])
+            metrics = np.concatenate([np.asarray(r.metrics, float).reshape(
+                r.n_designs, len(r.metric_names)) for r in responses])
             inputs = responses[0].inputs[0] if responses[0].inputs else None
-            return FullEvaluation(f=f, g=g, inputs=inputs)
+            return FullEvaluation(f=f, g=g, inputs=inputs,
+                                  metric_names=list(responses[0].metric_names),
+                                  metrics=metrics)
         return evaluate
 
-    def _simplified_gradient(self, request: TuningRequest):
+    def _simplified_gradient(self, request: TuningRequest, scenario: str | None = None):
+        """The scaled simplified gradient of ``scenario`` from the gradient evaluator."""
+        scenario = scenario or request.scenario
+
         def gradient(x: np.ndarray, inputs: Any) -> tuple[np.ndarray, np.ndarray]:
             response = call(self, self.gradient_client, EvaluateGradient.Request(
-                scenario=request.scenario, n_vars=request.n_vars, x=x.tolist(),
+                scenario=scenario, n_vars=request.n_vars, x=x.tolist(),
                 step=request.fd_step,
                 inputs=TimeHistories() if inputs is None else inputs), self.timeout_s,
                 self._stopped)
@@ -236,11 +253,22 @@ class CoordinatorNode(Node):
             return np.asarray(response.df, float), dg
         return gradient
 
-    def _calibrate(self, goal_handle, request: TuningRequest) -> Calibrate.Response:
-        self._calibrating = (goal_handle, request)
+    @staticmethod
+    def _simplified_scenarios(request: TuningRequest) -> list[str]:
+        """The objective's scenario and every other one with simplified-gradient terms."""
+        names = [request.scenario] + [
+            c.scenario for c, source in zip(request.constraints,
+                                            request.constraint_gradient_sources())
+            if source == 'simplified']
+        return list(dict.fromkeys(names))
+
+    def _calibrate(self, goal_handle, request: TuningRequest, scenario: str | None = None
+                   ) -> Calibrate.Response:
+        scenario = scenario or request.scenario
+        self._calibrating = (goal_handle, scenario, request.n_vars)
         try:
             response = call(self, self.calibrate_client, Calibrate.Request(
-                scenario=request.scenario, n_vars=request.n_vars,
+                scenario=scenario, n_vars=request.n_vars,
                 n_samples=int(self.get_parameter('calibration_samples').value), force=False),
                 self.timeout_s * 2, self._stopped)
         finally:
@@ -251,8 +279,7 @@ class CoordinatorNode(Node):
 
     def _on_calibration_progress(self, msg: CalibrationProgress) -> None:
         calibrating = self._calibrating
-        if calibrating is not None and (msg.scenario, msg.n_vars) == (
-                calibrating[1].scenario, calibrating[1].n_vars):
+        if calibrating is not None and (msg.scenario, msg.n_vars) == calibrating[1:]:
             calibrating[0].publish_feedback(Optimise.Feedback(phase='calibration',
                                                               calibration=msg))
 
@@ -299,11 +326,18 @@ class CoordinatorNode(Node):
             return goal_handle.is_cancel_requested
 
         try:
+            gradients = {}
             if request.gradient_source == 'simplified':
-                counter.calibration_runs = int(self._calibrate(goal_handle, request).n_full_runs)
+                for scenario in self._simplified_scenarios(request):
+                    counter.calibration_runs += int(
+                        self._calibrate(goal_handle, request, scenario).n_full_runs)
+                    gradients[scenario] = self._simplified_gradient(request, scenario)
+            models = {name: self._full_model(request, name)
+                      for name in request.constraint_scenarios}
             result = optimise(request, self._full_model(request),
                               self._simplified_gradient(request), on_iteration,
-                              counter=counter)
+                              counter=counter, constraint_models=models,
+                              constraint_gradients=gradients)
         except (ValueError, ServiceCallError) as error:
             self.get_logger().error(f'optimisation failed: {error}')
             goal_handle.abort()
@@ -321,7 +355,10 @@ class CoordinatorNode(Node):
         message = Optimise.Result(
             success=bool(result.success), message=str(result.message),
             x=np.asarray(result.x, float).tolist(), f=float(result.f),
-            g=np.asarray(result.g, float).tolist(), physical_names=list(physical),
+            g=np.asarray(result.g, float).tolist(),
+            constraint_values=list(result.constraint_values),
+            constraint_gradient_sources=list(result.constraint_gradient_sources),
+            physical_names=list(physical),
             physical_values=list(physical.values()), iterations=int(result.nit),
             history=history_msgs, wall_time_s=time.monotonic() - t0, **counter.as_dict())
         if goal_handle.is_cancel_requested:

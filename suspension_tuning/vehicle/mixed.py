@@ -113,7 +113,8 @@ def vehicle_state(outputs: dict[str, np.ndarray], index: int, step: int,
 
 def run_mixed(x: np.ndarray, controllers: list[Controller] | None = None,
               params: VehicleParams | None = None, config: dict[str, Any] | None = None,
-              valve_period_s: float | None = None) -> ScenarioResult:
+              valve_period_s: float | None = None,
+              setting: SuspensionSetting | None = None) -> ScenarioResult:
     """Simulate the mixed scenario with closed-loop valve control.
 
     Parameters
@@ -129,6 +130,10 @@ def run_mixed(x: np.ndarray, controllers: list[Controller] | None = None,
         Scenario configuration (default config/mixed.yaml).
     valve_period_s : float, optional
         Control period of the valves, s (default: the valve controller's, 5 ms).
+    setting : SuspensionSetting, optional
+        Both states' settings of every design, in place of x's ride state beside the
+        baseline handling state (``vehicle.passive``: passive and switched settings);
+        x is then only recorded.
 
     Returns
     -------
@@ -151,7 +156,10 @@ def run_mixed(x: np.ndarray, controllers: list[Controller] | None = None,
     steps_per_period = int(round(period / params.dt_s))
     if abs(steps_per_period * params.dt_s - period) > 1e-12:
         raise ValueError(f'valve period {period} s is not a multiple of dt {params.dt_s} s')
-    setting = SuspensionSetting.from_design(design.to_physical(xv, n_vars), 'ride', params)
+    if setting is None:
+        setting = SuspensionSetting.from_design(design.to_physical(xv, n_vars), 'ride', params)
+    elif setting.batch_size != batch:
+        raise ValueError(f'setting has {setting.batch_size} designs, x has {batch}')
     track, driver, speed_ctrl, _ = handling_setup(params, load_scenarios_config()['handling'])
     speed = float(cfg['speed_kmh']) / 3.6
     speed_ctrl = replace(speed_ctrl, target_speed_mps=speed)
