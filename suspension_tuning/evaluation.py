@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from suspension_tuning.vehicle.design import VARIABLE_NAMES, validate_design
 from suspension_tuning.vehicle.mixed import run_mixed
+from suspension_tuning.vehicle.params import load_vehicle_params, with_integrator
 from suspension_tuning.vehicle.scenarios import SCENARIOS as MODEL_SCENARIOS
 from suspension_tuning.vehicle.scenarios import ScenarioResult, run_scenario
 
@@ -93,7 +94,7 @@ def metric_table(metrics: dict[str, np.ndarray], batch: int) -> tuple[list[str],
 
 
 def evaluate(scenario: str, designs: Array, controllers: list | None = None,
-             **kwargs: Any) -> DesignEvaluation:
+             integrator: str | None = None, **kwargs: Any) -> DesignEvaluation:
     """Run the full model on a batch of designs (m, n_vars).
 
     Parameters
@@ -105,9 +106,14 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
     controllers : list of callables, optional
         Valve controllers of the 'mixed' scenario, one per design (default in-process;
         see :func:`suspension_tuning.vehicle.mixed.run_mixed`).
+    integrator : str, optional
+        'fixed_step' or 'variable_step' (default config/vehicle.yaml, fixed_step).
     **kwargs
         Passed to :func:`suspension_tuning.vehicle.scenarios.run_scenario`.
     """
+    if integrator is not None:
+        params = kwargs.get('params') or load_vehicle_params()
+        kwargs['params'] = with_integrator(params, integrator)
     if scenario == 'mixed':
         result = run_mixed(designs, controllers, **kwargs)
     else:

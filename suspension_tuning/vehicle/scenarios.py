@@ -40,7 +40,12 @@ from .full_model import (
     ValveState,
     outputs_from_channels,
 )
-from .params import VehicleParams, load_scenarios_config, load_vehicle_params
+from .params import (
+    VehicleParams,
+    load_scenarios_config,
+    load_vehicle_params,
+    with_integrator,
+)
 
 SCENARIOS = ('ride', 'handling')
 
@@ -113,6 +118,7 @@ def run_scenario(
     params: VehicleParams | None = None,
     n_vars: int | None = None,
     config: dict | None = None,
+    integrator: str | None = None,
 ) -> ScenarioResult:
     """Simulate a scenario for one or many designs.
 
@@ -129,6 +135,9 @@ def run_scenario(
         Number of design variables (default: the length of x's last axis).
     config : dict, optional
         Scenario configuration (default config/scenarios.yaml).
+    integrator : str, optional
+        'fixed_step' (RK4) or 'variable_step' (Dormand-Prince 5(4) with error control);
+        default ``params.integrator.method`` (config/vehicle.yaml: fixed_step).
 
     Returns
     -------
@@ -141,7 +150,7 @@ def run_scenario(
         Unknown scenario name, or a bad design vector (wrong length, NaN, out of bounds).
     """
     _check_name(name)
-    params = params if params is not None else load_vehicle_params()
+    params = with_integrator(params if params is not None else load_vehicle_params(), integrator)
     cfg = config if config is not None else load_scenarios_config()
     xv, setting = _settings(name, x, n_vars, params)
     if name == 'ride':
