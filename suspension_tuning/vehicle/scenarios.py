@@ -72,6 +72,9 @@ class ScenarioResult:
         Wall-clock time of the simulation (excluding set-up) [s].
     simulated_time_s : float
         Simulated time per design [s].
+    integrator : dict
+        'method' ('fixed_step' or 'variable_step') and, for variable steps, 'stats'
+        (``FullVehicleModel.integrator_stats``: step counts, step log).
     """
 
     name: str
@@ -82,6 +85,7 @@ class ScenarioResult:
     histories: dict[str, np.ndarray] = field(repr=False)
     wall_time_s: float
     simulated_time_s: float
+    integrator: dict = field(default_factory=dict, repr=False)
 
 
 def ride_road_spec(cfg: dict) -> road_mod.RoadSpec:
@@ -119,6 +123,7 @@ def run_scenario(
     n_vars: int | None = None,
     config: dict | None = None,
     integrator: str | None = None,
+    step_log_capacity: int = 0,
 ) -> ScenarioResult:
     """Simulate a scenario for one or many designs.
 
@@ -138,6 +143,9 @@ def run_scenario(
     integrator : str, optional
         'fixed_step' (RK4) or 'variable_step' (Dormand-Prince 5(4) with error control);
         default ``params.integrator.method`` (config/vehicle.yaml: fixed_step).
+    step_log_capacity : int
+        Variable-step integrator: accepted steps logged per design (time, size) into
+        ``result.integrator['stats']`` (0 = none).
 
     Returns
     -------
@@ -154,8 +162,18 @@ def run_scenario(
     cfg = config if config is not None else load_scenarios_config()
     xv, setting = _settings(name, x, n_vars, params)
     if name == 'ride':
-        return _run_ride(xv, setting, params, cfg['ride'], cfg['handling']['speed_controller'])
-    return _run_handling(xv, setting, params, cfg['handling'])
+        return _run_ride(
+            xv, setting, params, cfg['ride'], cfg['handling']['speed_controller'],
+            step_log_capacity,
+        )  # fmt: skip
+    return _run_handling(xv, setting, params, cfg['handling'], step_log_capacity)
+
+
+def _integrator_info(rec: SimulationRecord) -> dict:
+    info = {'method': rec.extra.get('integrator', 'fixed_step')}
+    if 'integrator_stats' in rec.extra:
+        info['stats'] = rec.extra['integrator_stats']
+    return info
 
 
 def decimated_histories(rec: SimulationRecord) -> dict[str, np.ndarray]:
@@ -170,7 +188,12 @@ def decimated_histories(rec: SimulationRecord) -> dict[str, np.ndarray]:
 
 
 def _run_ride(
-    x: np.ndarray, setting: SuspensionSetting, params: VehicleParams, cfg: dict, sc_cfg: dict
+    x: np.ndarray,
+    setting: SuspensionSetting,
+    params: VehicleParams,
+    cfg: dict,
+    sc_cfg: dict,
+    step_log_capacity: int = 0,
 ) -> ScenarioResult:
     road, road_len = _ride_road(ride_road_spec(cfg), params.tyre.contact_length_m)
     speed = float(cfg['speed_kmh']) / 3.6
@@ -183,7 +206,7 @@ def _run_ride(
         )
     batch = x.shape[0]
     sc = manoeuvre.SpeedController.from_yaml_dict(sc_cfg, speed)
-    model = FullVehicleModel(params, road)
+    model = FullVehicleModel(params, road, step_log_capacity=step_log_capacity)
     model.reset(setting, ValveState.ride(batch), speed, x0_m=x0, speed_controller=sc)
     rec = model.simulate(duration)
     fs = 1.0 / rec.dt_s
@@ -204,7 +227,9 @@ def _run_ride(
         'speed_mean_mps': np.mean(hist['speed_mps'], axis=-1),
     }
     f = metrics.f_ride(a_d, a_p)
-    return ScenarioResult('ride', x, np.asarray(f), g, met, hist, rec.wall_time_s, duration)
+    return ScenarioResult(
+        'ride', x, np.asarray(f), g, met, hist, rec.wall_time_s, duration, _integrator_info(rec)
+    )
 
 
 def handling_setup(
@@ -247,13 +272,17 @@ def crossing_time(x_hist: np.ndarray, t: np.ndarray, x_target: float) -> np.ndar
 
 
 def _run_handling(
-    x: np.ndarray, setting: SuspensionSetting, params: VehicleParams, cfg: dict
+    x: np.ndarray,
+    setting: SuspensionSetting,
+    params: VehicleParams,
+    cfg: dict,
+    step_log_capacity: int = 0,
 ) -> ScenarioResult:
     track, driver, sc, speed = handling_setup(params, cfg)
     lead, run_out = float(cfg['lead_in_m']), float(cfg['run_out_m'])
     duration = (lead + track.x_end_m + run_out) / speed
     batch = x.shape[0]
-    model = FullVehicleModel(params, None)
+    model = FullVehicleModel(params, None, step_log_capacity=step_log_capacity)
     model.reset(
         setting, ValveState.handling(batch), speed, x0_m=-lead, driver=driver, speed_controller=sc
     )
@@ -307,7 +336,10 @@ def _run_handling(
         't_manoeuvre_s': np.stack(t_man, axis=1),
     }
     f = metrics.f_hand(rate_rms, peak)
-    return ScenarioResult('handling', x, np.asarray(f), g, met, hist, rec.wall_time_s, duration)
+    return ScenarioResult(
+        'handling', x, np.asarray(f), g, met, hist, rec.wall_time_s, duration,
+        _integrator_info(rec),
+    )  # fmt: skip
 
 
 def simulate_timed(
