@@ -33,6 +33,7 @@ from suspension_tuning.vehicle.design import (
     to_physical,
     validate_design,
 )
+from suspension_tuning.vehicle.params import INTEGRATORS
 
 Array = NDArray[np.float64]
 
@@ -101,6 +102,9 @@ class TuningRequest:
         Dynamic-Q options (see :class:`DynamicQOptions`).
     fd_step : float
         Central-difference half step of full-model gradients, normalised units.
+    integrator : str
+        Full-model integrator: 'fixed_step', 'variable_step' or '' (the simulation's
+        default, config/vehicle.yaml).
     """
 
     scenario: str
@@ -109,6 +113,7 @@ class TuningRequest:
     gradient_source: str = 'simplified'
     options: Mapping[str, Any] | None = None
     fd_step: float = 0.025
+    integrator: str = ''
     start: Array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -121,6 +126,9 @@ class TuningRequest:
         if self.gradient_source not in GRADIENT_SOURCES:
             raise ValueError(f'unknown gradient source {self.gradient_source!r}; '
                              f'valid: {", ".join(GRADIENT_SOURCES)}')
+        if self.integrator not in ('', *INTEGRATORS):
+            raise ValueError(f'unknown integrator {self.integrator!r}; '
+                             f'valid: {", ".join(INTEGRATORS)} or empty (default)')
         if not (np.isfinite(self.fd_step) and 0.0 < self.fd_step <= 0.25):
             raise ValueError(f'fd_step must lie in (0, 0.25], got {self.fd_step}')
         x0 = centre(self.n_vars) if self.x0 is None or len(self.x0) == 0 else self.x0

@@ -85,3 +85,12 @@ def test_physical_settings_use_litres_at_the_edge():
     assert low['dpsf_front'] == pytest.approx(0.1029)
     assert low['gas_volume_front_l'] == pytest.approx(0.1005)
     assert low['gas_volume_rear_l'] == pytest.approx(0.35)
+
+
+def test_tuning_request_names_the_integrator_and_rejects_unknown_ones():
+    from suspension_tuning.tuning import TuningRequest
+
+    assert TuningRequest('ride', 2).integrator == ''  # the simulation's default
+    assert TuningRequest('ride', 2, integrator='variable_step').integrator == 'variable_step'
+    with pytest.raises(ValueError, match='unknown integrator'):
+        TuningRequest('ride', 2, integrator='rk45')
