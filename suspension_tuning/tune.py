@@ -36,6 +36,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--gradient', default='simplified', help="'simplified' or 'full'")
     parser.add_argument('--max-iterations', type=int, default=0, help='0 = coordinator default')
     parser.add_argument('--move-limit', type=float, default=0.0, help='0 = coordinator default')
+    parser.add_argument('--integrator', default='',
+                        help="full model: 'fixed_step' or 'variable_step' (default: the "
+                             "simulation's, config/vehicle.yaml)")
     parser.add_argument('--action', default='/coordinator/optimise', help='action name')
     parser.add_argument('--server-timeout', type=float, default=30.0,
                         help='seconds to wait for the coordinator')
@@ -118,7 +121,8 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         goal = Optimise.Goal(scenario=args.scenario, n_vars=args.n_vars, x0=args.x0,
                              gradient_source=args.gradient,
-                             max_iterations=args.max_iterations, move_limit=args.move_limit)
+                             max_iterations=args.max_iterations, move_limit=args.move_limit,
+                             integrator=args.integrator)
         sending = client.send_goal_async(
             goal, feedback_callback=lambda fb: print(format_feedback(fb.feedback.latest),
                                                      flush=True))

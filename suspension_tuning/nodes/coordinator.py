@@ -226,13 +226,14 @@ class CoordinatorNode(Node):
             options['rho0'] = float(goal.move_limit)
         return TuningRequest(goal.scenario, int(goal.n_vars), list(goal.x0) or None,
                              goal.gradient_source or 'simplified', options,
-                             float(self.get_parameter('fd_step').value))
+                             float(self.get_parameter('fd_step').value), goal.integrator)
 
     def _publish_run_config(self, request: TuningRequest) -> None:
         config = {
             'scenario': request.scenario, 'n_vars': request.n_vars,
             'x0': request.start.tolist(), 'gradient_source': request.gradient_source,
             'optimiser_options': request.options, 'fd_step': request.fd_step,
+            'integrator': request.integrator or 'simulation default',
             'coordinator_parameters': {name: p.value for name, p in
                                        self.get_parameters_by_prefix('').items()},
         }
@@ -254,7 +255,8 @@ class CoordinatorNode(Node):
             responses = self.pool.evaluate(
                 request.scenario, request.n_vars, designs,
                 return_inputs=(request.gradient_source == 'simplified' and len(designs) == 1
-                               and request.scenario == 'handling'))
+                               and request.scenario == 'handling'),
+                integrator=request.integrator)
             f = np.concatenate([np.asarray(r.f, float) for r in responses])
             g = np.concatenate([np.asarray(r.g, float).reshape(r.n_designs, r.n_constraints)
                                 for r in responses])
@@ -277,7 +279,8 @@ class CoordinatorNode(Node):
     def _calibrate(self, request: TuningRequest) -> Calibrate.Response:
         response = self.caller.call(self.calibrate_client, Calibrate.Request(
             scenario=request.scenario, n_vars=request.n_vars,
-            n_samples=int(self.get_parameter('calibration_samples').value), force=False),
+            n_samples=int(self.get_parameter('calibration_samples').value), force=False,
+            integrator=request.integrator),
             self.timeout_s * 2)
         if not response.success:
             raise ValueError(f'calibration failed: {response.error}')

@@ -40,6 +40,7 @@ from suspension_tuning import evaluation, simplified_inputs
 from suspension_tuning.nodes._service_calls import helper_node
 from suspension_tuning.nodes._service_thread import ServiceLoop, ServiceThread
 from suspension_tuning.nodes._spin import run_node
+from suspension_tuning.vehicle.params import load_vehicle_params
 from suspension_tuning.vehicle.simplified import SimplifiedInputs
 
 CORNERS = ['FL', 'FR', 'RL', 'RR']
@@ -124,6 +125,8 @@ class FullVehicleSimNode(Node):
         self.declare_parameter('telemetry_decimation', 2)
         self.declare_parameter('valve_controller', 'ros')
         self.declare_parameter('closed_loop_timeout_s', 5.0)
+        # full-model integrator when a request names none (config/vehicle.yaml default)
+        self.declare_parameter('integrator', load_vehicle_params().integrator.method)
         self.loop_node, self.loop_executor = helper_node(self, f'{self.get_name()}_closed_loop')
         self.clock_pub = self.loop_node.create_publisher(Clock, '/clock', 10)
         self.state_pub = self.loop_node.create_publisher(VehicleState, '/vehicle/state',
@@ -146,8 +149,9 @@ class FullVehicleSimNode(Node):
         try:
             designs = evaluation.parse_designs(request.scenario, int(request.n_vars),
                                                request.designs)
-            result = evaluation.evaluate(request.scenario, designs,
-                                         controllers=self._controllers(request, designs))
+            result = evaluation.evaluate(
+                request.scenario, designs, controllers=self._controllers(request, designs),
+                integrator=request.integrator or self.get_parameter('integrator').value)
         except ValueError as error:
             response.success = False
             response.error = str(error)

@@ -73,9 +73,10 @@ class GradientEvaluatorNode(Node):
 
     # ---------------------------------------------------------------- calibrate
     def _cache_path(self, key: dict) -> Path:
+        tail = f"_{key['integrator']}" if 'integrator' in key else ''
         return self.calibration_dir / (f"{key['scenario']}_{key['n_vars']}var_"
                                        f"{key['n_samples']}s_{key['seed']}_"
-                                       f"{key['config_hash']}.json")
+                                       f"{key['config_hash']}{tail}.json")
 
     def _on_calibrate(self, request: Calibrate.Request,
                       response: Calibrate.Response) -> Calibrate.Response:
@@ -85,6 +86,8 @@ class GradientEvaluatorNode(Node):
             n_samples, seed = calibration_settings(
                 int(request.n_samples or self.get_parameter('default_samples').value))
             key = scaling_key(scenario, n_vars, n_samples, seed)
+            if request.integrator:  # samples of a named integrator get their own cache
+                key['integrator'] = request.integrator
             path = self._cache_path(key)
             scaling = None
             if path.exists() and not request.force:
@@ -127,7 +130,8 @@ class GradientEvaluatorNode(Node):
         # Only the handling model needs each sample's inputs (simplified_inputs.py).
         answer = self.caller.call(self.sim_client, EvaluateDesign.Request(
             scenario=scenario, n_vars=n_vars, designs=x.ravel().tolist(),
-            return_inputs=scenario == 'handling'), timeout)
+            return_inputs=scenario == 'handling', integrator=key.get('integrator', '')),
+            timeout)
         if not answer.success:
             raise ValueError(f'full-model samples failed: {answer.error}')
         full_f = np.asarray(answer.f, dtype=float)
