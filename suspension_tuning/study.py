@@ -90,6 +90,11 @@ QUICK_GRID_POINTS = {2: 11, 4: 3}
 #: Calibration sample counts of the simplified-gradient runs [P s.6.3.1: 30; issue 9
 #: allows fewer if the optimum holds: 16 = the 2^4 corners for n = 4].
 CALIBRATION_SAMPLES = (30, 16)
+#: Grid points per axis of the fixed-step reference in the noisy study [E]: the smooth
+#: model's optimum is found by SLSQP polishing from the methods' final designs and the
+#: noisy reference (the smooth study's polish from its methods' points reached the dense
+#: grid's optimum in every case), so a coarse grid suffices.
+FIXED_REFERENCE_GRID = {2: 5, 4: 3}
 #: Designs per full-model batch of the reference grid [E: ~2 s per ride batch].
 GRID_BATCH = 64
 #: SLSQP's finite-difference step, normalised units: SciPy's default sqrt(machine eps).
@@ -703,9 +708,10 @@ def run_case(
     With ``best_fd_step`` SLSQP also runs with that forward-difference step
     ('slsqp_best_fd', see :func:`noise_optimal_fd_step`), and the reference's polish
     uses it.  With ``fixed_reference`` (runs on the variable-step model) the reference
-    optimum of the fixed-step model is found too (same grid, polished from its best
-    points and every method's final design) and every final design is run on the
-    fixed-step model and compared with it.
+    optimum of the fixed-step model is found too (a :data:`FIXED_REFERENCE_GRID`
+    grid, polished from its best points and every method's final design, the noisy
+    reference's included) and every final design is run on the fixed-step model and
+    compared with it.
 
     Returns
     -------
@@ -775,8 +781,9 @@ def run_case(
     if fixed_reference:
         finals = np.array([r.x for r, _ in runs])
         fixed_ref, _ = reference_optimum(
-            scenario, n_vars, grid_points, finals, record=False, integrator='fixed_step'
-        )
+            scenario, n_vars, min(grid_points, FIXED_REFERENCE_GRID[n_vars]), finals,
+            record=False, integrator='fixed_step',
+        )  # fmt: skip
         log(f'  {scenario}_{n_vars}var fixed-step reference: f = {fixed_ref.f:.6f} '
             f'({fixed_ref.n_full_runs} full runs, {fixed_ref.wall_time_s:.1f} s)')
         fixed = run_scenario(scenario, finals, n_vars=n_vars, integrator='fixed_step')
