@@ -1155,22 +1155,21 @@ def run_study(
         f'100 (f - f_ref) / |f_ref|.\n\n' + markdown_tables(cases, calibration_samples)
     )
     (out / 'method_study.md').write_text(text)
-    payload = {
-        'wall_time_s': wall,
-        'cases': [
-            {
-                'scenario': c['reference'].scenario,
-                'n_vars': c['reference'].n_vars,
-                'baseline_f': c['baseline_f'],
-                'baseline_x': c['baseline_x'],
-                'ratios': {str(s): cost_ratios(c, s) for s in calibration_samples},
-                'runs': [{**asdict(r), 'name': r.name} for r in c['runs']],
-            }
-            for c in cases
-        ],
-    }
-    (out / 'results.json').write_text(json.dumps(payload, indent=1, default=float))
+    _write_results(out / 'results.json', cases, wall, lambda c: {
+        'baseline_x': c['baseline_x'],
+        'ratios': {str(s): cost_ratios(c, s) for s in calibration_samples}})
     return {'cases': cases, 'markdown': text, 'plots': plots, 'wall_time_s': wall}
+
+
+def _write_results(path: Path, cases: Sequence[dict[str, Any]], wall: float,
+                   extra: Callable[[dict[str, Any]], dict[str, Any]]) -> None:
+    """Every case's runs (and ``extra(case)``) as JSON."""
+    payload = {'wall_time_s': wall, 'cases': [
+        {'scenario': c['reference'].scenario, 'n_vars': c['reference'].n_vars,
+         'baseline_f': c['baseline_f'], **extra(c),
+         'runs': [{**asdict(r), 'name': r.name} for r in c['runs']]}
+        for c in cases]}  # fmt: skip
+    path.write_text(json.dumps(payload, indent=1, default=float))
 
 
 def noisy_markdown(cases: Sequence[dict[str, Any]], calibration_samples: Sequence[int]) -> str:
@@ -1248,22 +1247,10 @@ def _write_noisy(out: Path, cases: list, calibration_samples: Sequence[int],
         'on each model.\n\n' + noisy_markdown(cases, calibration_samples)
     )
     (out / 'method_study_noisy.md').write_text(text)
-    payload = {
-        'wall_time_s': wall,
-        'cases': [
-            {
-                'scenario': c['reference'].scenario,
-                'n_vars': c['reference'].n_vars,
-                'baseline_f': c['baseline_f'],
-                'fd_step_search': c['fd_step_search'],
-                'fixed_reference': asdict(c['fixed_reference']),
-                'ratios': {str(s): noisy_ratios(c, s) for s in calibration_samples},
-                'runs': [{**asdict(r), 'name': r.name} for r in c['runs']],
-            }
-            for c in cases
-        ],
-    }
-    (out / 'results_noisy.json').write_text(json.dumps(payload, indent=1, default=float))
+    _write_results(out / 'results_noisy.json', cases, wall, lambda c: {
+        'fd_step_search': c['fd_step_search'],
+        'fixed_reference': asdict(c['fixed_reference']),
+        'ratios': {str(s): noisy_ratios(c, s) for s in calibration_samples}})
     return {'cases': cases, 'markdown': text, 'plots': plots, 'wall_time_s': wall}
 
 

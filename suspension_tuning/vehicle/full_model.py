@@ -785,24 +785,11 @@ class FullVehicleModel:
         else:
             full = np.empty((b, K.N_FULL, 0))
             hist = np.empty((b, K.N_HIST, 0))
-        r = self.road
         if self.integrator.method == 'variable_step':
             self._run_variable(n, full, hist)
         else:
             K.integrate(
-                self._state,
-                self._ss,
-                self._inputs,
-                self._P,
-                self._Minv,
-                self._pc,
-                self._dk,
-                self._dv,
-                self._ds,
-                r.x0_m,
-                r.dx_m,
-                r.z_left_m,
-                r.z_right_m,
+                *self._kernel_inputs(),
                 self.dt_s,
                 n,
                 self.step_index,
@@ -821,22 +808,15 @@ class FullVehicleModel:
             if hist.shape[2]:
                 self._hist_chunks.append(hist)
 
-    def _run_variable(self, n: int, full: np.ndarray, hist: np.ndarray) -> None:
+    def _kernel_inputs(self) -> tuple:
+        """States, strut states, inputs, parameters and road: what both kernels take first."""
         r = self.road
+        return (self._state, self._ss, self._inputs, self._P, self._Minv, self._pc, self._dk,
+                self._dv, self._ds, r.x0_m, r.dx_m, r.z_left_m, r.z_right_m)  # fmt: skip
+
+    def _run_variable(self, n: int, full: np.ndarray, hist: np.ndarray) -> None:
         VS.integrate_variable(
-            self._state,
-            self._ss,
-            self._inputs,
-            self._P,
-            self._Minv,
-            self._pc,
-            self._dk,
-            self._dv,
-            self._ds,
-            r.x0_m,
-            r.dx_m,
-            r.z_left_m,
-            r.z_right_m,
+            *self._kernel_inputs(),
             self.dt_s,
             n,
             self.step_index,
