@@ -32,7 +32,7 @@ import numpy as np
 from suspension_tuning.optim.scaling import FUNCTION_NAMES
 from suspension_tuning.studies.noise import sweep_x1
 
-TARGET_VARIABLE_TO_FIXED = 100.0  # [-] issue: variable-step noise >= 100x fixed-step noise
+TARGET_VARIABLE_TO_FIXED = 100.0  # [-] target: variable-step noise >= 100x fixed-step noise
 
 
 def main() -> None:
