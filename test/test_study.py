@@ -207,3 +207,13 @@ def test_noisy_ratios_pick_the_cheapest_slsqp_variant_within_one_percent():
     assert c['full_runs_ratio_vs_slsqp_noisy_with_calibration'] == pytest.approx(130 / 48)
     assert c['optimum_gap_pct_noisy'] == pytest.approx(0.3)
     assert c['slsqp_default_gap_pct_noisy'] == pytest.approx(6.0)
+
+
+def test_study_run_configuration_names_the_integrator():
+    from suspension_tuning.study import StudyRun, run_config
+
+    run = StudyRun('ride', 2, 'centre', 'slsqp', 0, [0.5, 0.5], -0.15, [-1.0] * 4, 0.0, 3,
+                   20, 0, 0, 1.0, details={'integrator': 'variable_step', 'eps': 0.07})
+    config = run_config(run)
+    assert config['integrator'] == 'variable_step'  # what the bag's run_config records
+    assert config['method'] == 'slsqp' and config['eps'] == 0.07
