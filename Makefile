@@ -1,6 +1,6 @@
 # suspension_tuning: the two commands a user needs on a fresh machine are
 #   make demo    (sets everything up, then runs the main job)
-#   make test    (sets everything up, then runs ruff and the test suite)
+#   make test    (sets everything up, then runs ruff, the test suite and the example project)
 # `make setup` is idempotent: stamps in .stamps/ make it take seconds when nothing changed.
 
 SHELL := /bin/bash
@@ -21,9 +21,9 @@ export AMENT_PREFIX_PATH := $(abspath $(VENV))
 INTERFACE_FILES := $(shell find suspension_tuning_interfaces -type f)
 PIP_QUIET := 2>&1 | { grep -v -e 'is ignored: it is neither' -e '^$$' || true; }
 
-.PHONY: setup test lint demo bench study clean
+.PHONY: setup test lint demo bench study sample-bag clean
 
-setup: $(STAMPS)/package
+setup: $(STAMPS)/package $(STAMPS)/npm
 
 $(STAMPS)/venv:
 	@mkdir -p $(STAMPS)
@@ -44,11 +44,26 @@ $(STAMPS)/package: $(STAMPS)/interfaces setup.py setup.cfg package.xml resource/
 	$(PY) scripts/install_ament_files.py $(VENV)
 	@touch $@
 
+# Foxglove's own decoding libraries (pinned in tools/foxglove/package-lock.json), installed
+# into tools/foxglove/node_modules: the tests decode recorded bags with them.  Without
+# npm on the machine those tests skip and say why.
+$(STAMPS)/npm: tools/foxglove/package.json tools/foxglove/package-lock.json
+	@mkdir -p $(STAMPS)
+	@if command -v npm >/dev/null; then \
+		npm ci --prefix tools/foxglove --no-audit --no-fund --loglevel=error; \
+	else \
+		echo "npm not found: the Foxglove decoding tests will be skipped"; \
+	fi
+	@touch $@
+
 lint: setup
 	$(VENV)/bin/ruff check .
 
+# The example project runs from its own folder, against the installed package and
+# the testing kit's pytest plugin, as a user's project would.
 test: lint
 	$(PY) -m pytest test
+	cd examples/custom_valve_controller && $(abspath $(PY)) -m pytest
 
 demo: setup
 	$(PY) -m suspension_tuning.demo
@@ -59,5 +74,10 @@ study: setup
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b; done
 
+# bags/sample: the ride run of make demo, recorded again (after a change of the model,
+# the road or the bag layout), checked with Foxglove's decoder where node is installed.
+sample-bag: setup
+	$(PY) scripts/regenerate_sample_bag.py
+
 clean:
-	rm -rf $(VENV) $(STAMPS) build *.egg-info
+	rm -rf $(VENV) $(STAMPS) build *.egg-info tools/foxglove/node_modules

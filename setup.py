@@ -36,5 +36,7 @@ setup(
     maintainer_email='maintainers@suspension-tuning.dev',
     description='Dynamic-Q tuning of the 4S4 suspension of a Land Rover Defender 110.',
     license='Apache-2.0',
-    entry_points={'console_scripts': CONSOLE_SCRIPTS},
+    # The testing kit's fixtures for any pytest session with the package installed.
+    entry_points={'console_scripts': CONSOLE_SCRIPTS,
+                  'pytest11': ['suspension_tuning = suspension_tuning.testing.pytest_plugin']},
 )

@@ -11,15 +11,19 @@ calibration from 30 full-model samples included) twice:
   untimed warm-up goal first starts its worker threads.
 
 Prints ``name: value`` lines, ending with ``ros_overhead_fraction`` = graph wall time /
-in-process wall time - 1 (target <= 0.02): the median over 20 pairs of runs made
+in-process wall time - 1 (target <= 0.05 on 2 cores): the median over 20 pairs of runs made
 next to each other, in alternating order, so that the machine's drift of its speed
 (+-10 % over minutes on a shared machine) cancels within a pair; the interquartile
 range of the pairs, a bootstrap 95 % interval of their median
 (``ros_overhead_fraction_ci95``) and the ratio of the two medians are printed too
 (``--pairs N`` for another number of pairs).  Both runs must
-reach the same bits.  It also prints the time the graph adds with the time spent
-inside the models removed from both runs (``ros_overhead_fraction_model_time_removed``).
-DDS stays on loopback with a domain of its own.
+reach the same bits.  What the added time is made of: the time the graph adds
+outside the models (service calls, serialisation, executors, the action; model time
+removed from both runs, ``graph_added_time_s``) and the time the models themselves
+take longer in the graph (other threads, ``model_time_added_s``), per service round
+trip too, the bare round trip of a service without a model (``bare_round_trip_ms``)
+and what the round trips at that cost leave of the added time
+(``graph_added_beyond_bare_calls_s``).  DDS stays on loopback with a domain of its own.
 """
 
 from __future__ import annotations
@@ -49,7 +53,7 @@ class ModelClock:
     machine; subtracting it leaves the time the graph itself adds (service calls,
     serialisation, executors), which is what the ROS overhead is.  Each call is
     also kept in :attr:`calls` as ``(kind, entry time, exit time)``, kind 'full' or
-    'simplified' (``bench_graph_phases.py``).
+    'simplified'.
     """
 
     def __init__(self) -> None:
@@ -117,8 +121,7 @@ class Graph:
 
         rclpy.init()
         self.cache = tempfile.mkdtemp(prefix='bench_graph_calibration_')
-        # The nodes of `graph` (graph.build_nodes), without the recorder: evaluate,
-        # gradient, calibrate and the goals on the model loop.
+        # The nodes of `graph` (graph.build_nodes), without the recorder.
         self.nodes = build_nodes(workers=1, record=False, overrides={
             'gradient_evaluator': [Parameter('calibration_dir', value=self.cache)],
             'coordinator': [Parameter('calibration_samples', value=SAMPLES),
@@ -134,7 +137,7 @@ class Graph:
 
     def run(self) -> tuple[float, object]:
         """One optimisation from an empty calibration cache; (wall time, result)."""
-        from suspension_tuning.nodes._service_calls import wait_future
+        from suspension_tuning.nodes._spin import wait_future
 
         shutil.rmtree(self.cache)
         os.mkdir(self.cache)
@@ -146,20 +149,22 @@ class Graph:
     def bare_round_trip_s(self, calls: int = 200) -> float:
         """Median time of a call to the simulation worker's get_parameters service.
 
-        From the coordinator's private caller, as an evaluate call, to the worker
-        node's executor (evaluate itself has a thread of its own,
-        ``nodes/_service_thread.py``, about 0.2 ms quicker per call), without a model
-        run or logging.
+        From a client of the coordinator, as an evaluate call is made, to the worker
+        node's executor: the cost of one service call without a model run.
         """
         from rcl_interfaces.srv import GetParameters
+        from rclpy.callback_groups import ReentrantCallbackGroup
 
-        caller = self.coordinator.caller
-        client = caller.create_client(GetParameters, '/full_vehicle_sim/get_parameters')
+        from suspension_tuning.nodes._services import call
+
+        client = self.coordinator.create_client(GetParameters,
+                                                '/full_vehicle_sim/get_parameters',
+                                                callback_group=ReentrantCallbackGroup())
         request = GetParameters.Request(names=['telemetry_decimation'])
         times = []
         for _ in range(calls):
             start = time.perf_counter()
-            caller.call(client, request, 5.0)
+            call(self.coordinator, client, request, 5.0)
             times.append(time.perf_counter() - start)
         return float(np.median(times))
 
@@ -229,6 +234,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f'model_time_graph_s: {np.median(graph_model):.3f}')
     print(f'model_time_in_process_s: {np.median(local_model):.3f}')
     print(f'graph_added_time_s: {np.median(added):.4f}')
+    print(f'graph_added_per_round_trip_ms: {np.median(added) / trips * 1e3:.2f}')
+    # The rest: the action (goal, feedback, result), the run configuration, the
+    # conversion of the requests and responses beyond a bare call's.
+    print(f'graph_added_beyond_bare_calls_s: {np.median(added) - trips * bare_s:.4f}')
+    print('model_time_added_s: '
+          f'{np.median(np.array(graph_model) - np.array(local_model)):.4f}')
     print(f'ros_overhead_fraction_model_time_removed: {np.median(added) / local_s:.4f}')
     print(f'ros_overhead_fraction_of_medians: {graph_s / local_s - 1.0:.4f}')
     q1, q3 = np.percentile(pair_fractions, [25, 75])

@@ -36,6 +36,19 @@ def baseline_design(n_vars: int) -> np.ndarray:
     return from_physical(settings, n_vars)[0]
 
 
+def optimiser_stopped(message: str) -> bool:
+    """True if a goal's result message is one of Dynamic-Q's own stops.
+
+    An optimisation that converged or stopped on its own criteria (iteration limit, move
+    limit; possibly at an infeasible point) is a result the demo reports; anything else
+    (a bad goal, a failed evaluation, ROS shutting down) is a failure of the demo.
+    """
+    from suspension_tuning.optim.dynamic_q import STATUS_MESSAGES
+
+    own = {STATUS_MESSAGES[k] for k in STATUS_MESSAGES if k != 99}
+    return message.removesuffix(' (final point infeasible)') in own
+
+
 def report(scenario: str, result, baseline_f: float, baseline_x: np.ndarray) -> str:
     """The optimum beside the baseline, in physical units."""
     from suspension_tuning.tuning import physical_settings
@@ -74,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from suspension_tuning.graph import SpinningGraph, build_nodes
     from suspension_tuning.inspect_bag import write_plots
-    from suspension_tuning.nodes._service_calls import wait_future
+    from suspension_tuning.nodes._spin import wait_future
     from suspension_tuning.tune import format_feedback
 
     rclpy.init()
@@ -104,10 +117,13 @@ def main(argv: list[str] | None = None) -> int:
             handle = wait_future(action.send_goal_async(
                 Optimise.Goal(scenario=scenario, n_vars=args.n_vars,
                               gradient_source='simplified'),
-                feedback_callback=lambda fb: print('  ' + format_feedback(fb.feedback.latest),
+                feedback_callback=lambda fb: print('  ' + format_feedback(fb.feedback),
                                                    flush=True)), 60)
             result = wait_future(handle.get_result_async()).result
-            status |= 0 if result.success else 1
+            # a run that stops on the iteration limit (the ride problem on the Belgian
+            # paving, whose tyre-hop constraints the simplified models place only
+            # roughly) is reported, not an error of the demo
+            status |= 0 if result.success or optimiser_stopped(result.message) else 1
             deadline = time.monotonic() + 30
             while len(recorder.session.closed_bags) == closed_before:
                 if time.monotonic() > deadline:

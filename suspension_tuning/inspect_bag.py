@@ -83,9 +83,11 @@ def iterations(contents: BagContents) -> list[dict[str, Any]]:
     else:
         feedback = [t for t in contents.topics() if t.endswith(FEEDBACK_SUFFIX)]
         if feedback:
-            records = [
-                _record(decode(contents, m).feedback.latest) for m in contents.on(feedback[0])
-            ]
+            # Calibration feedback (phase 'calibration') carries no iteration; bags
+            # recorded before the phase field have iterations only.
+            decoded = [decode(contents, m).feedback for m in contents.on(feedback[0])]
+            records = [_record(f.latest) for f in decoded
+                       if getattr(f, 'phase', 'iteration') != 'calibration']
         else:
             result = optimum(contents)
             records = result['history'] if result else []
@@ -369,6 +371,8 @@ def write_plots(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]) -
                     for q in (s[1].orientation for s in samples)
                 ]
                 ax.plot(t, roll, label='roll deg')
+            elif first is not None and hasattr(first, 'accel'):  # AccelStamped: a seat
+                ax.plot(t, [s[1].accel.linear.z for s in samples], label='a_z m/s^2')
             elif first is not None and hasattr(first, 'name'):
                 field = 'effort' if any(len(s[1].effort) for s in samples) else 'position'
                 for j, name in enumerate(first.name):
@@ -459,8 +463,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         '--reindex',
         action='store_true',
-        help='first rewrite a truncated bag (killed recorder) into a complete '
-        'one, like ros2 bag reindex',
+        help='first rewrite the bag in place, like ros2 bag reindex: a truncated bag '
+        '(killed recorder) becomes a complete one, the schemas of an older bag come out '
+        'in the layout rosbag2 writes (and Foxglove decodes)',
     )
     args = parser.parse_args(argv)
     try:

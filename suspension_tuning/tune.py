@@ -4,8 +4,10 @@ Usage::
 
     ros2 run suspension_tuning tune --scenario ride --n-vars 4 --gradient simplified
 
-Prints one line per Dynamic-Q iteration (iteration, f, largest violation, model runs
-so far) from the action's feedback, then the result with the optimum in physical
+Prints the eq. 25 calibration's progress (full-model samples done of total; the first
+run of a model configuration spends them before its first iteration), then one line
+per Dynamic-Q iteration (iteration, f, largest violation, model runs so far) from the
+action's feedback, then the result with the optimum in physical
 units (damper scale factor, gas volume in litres).  Ctrl-C cancels the goal and exits
 with status 130.
 """
@@ -23,7 +25,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from suspension_tuning_interfaces.action import Optimise
 
-from suspension_tuning.nodes._service_calls import wait_future
+from suspension_tuning.nodes._spin import wait_future
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
@@ -45,8 +47,18 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def format_feedback(latest) -> str:
-    """Format one progress line of an IterationRecord."""
+def format_feedback(feedback: Optimise.Feedback) -> str:
+    """Format one progress line of the action's feedback.
+
+    Phase 'calibration': the eq. 25 full-model samples done of total (the first run of
+    a configuration spends them before its first iteration); phase 'iteration': the
+    Dynamic-Q iteration just finished.
+    """
+    if feedback.phase == 'calibration':
+        c = feedback.calibration
+        return (f'calibration (eq. 25): {c.samples_done:3d}/{c.samples_total} full-model '
+                f'samples  {c.wall_time_s:6.1f} s')
+    latest = feedback.latest
     x = ', '.join(f'{v:.4f}' for v in latest.x)
     return (f'iteration {latest.iteration:3d}  f = {latest.f:9.5f}  '
             f'max violation = {latest.max_violation:8.4f}  move limit = {latest.move_limit:.4f}  '
@@ -124,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
                              max_iterations=args.max_iterations, move_limit=args.move_limit,
                              integrator=args.integrator)
         sending = client.send_goal_async(
-            goal, feedback_callback=lambda fb: print(format_feedback(fb.feedback.latest),
+            goal, feedback_callback=lambda fb: print(format_feedback(fb.feedback),
                                                      flush=True))
         try:
             handle = wait_future(sending, args.server_timeout)

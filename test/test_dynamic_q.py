@@ -72,7 +72,7 @@ def test_minimize_reaches_published_optimum(name, record_property):
 
 def test_central_differences_when_no_jacobian_given():
     # HS35 without any jac: central differences (2n = 6 calls per gradient of f and of
-    # the constraint) reach the same optimum; counts are kept apart.
+    # the constraint) reach the same optimum.
     problem = hs35()
     constraints = [{'type': c['type'], 'fun': c['fun']} for c in problem['constraints']]
     result = _solve(problem, jac=None, constraints=constraints)
@@ -81,6 +81,82 @@ def test_central_differences_when_no_jacobian_given():
     assert result.ngev_by_source == {'central_difference': result.nit}
     assert result.nfev_fd == 6 * result.nit  # 2n objective calls per gradient, n = 3
     assert result.ncev_fd == 6 * result.nit  # and 2n calls of the constraint function
+
+
+def test_nfev_counts_every_call_of_fun_including_finite_differences():
+    # As scipy.optimize.minimize reports it (SLSQP: nfev = every call of fun, njev =
+    # gradient evaluations, analytic or by differences): counted by wrappers here.
+    problem = hs35()
+    calls = {'fun': 0, 'con': 0}
+
+    def fun(x):
+        calls['fun'] += 1
+        return problem['fun'](x)
+
+    def con(x):
+        calls['con'] += 1
+        return problem['constraints'][0]['fun'](x)
+
+    result = minimize(fun, problem['x0'], bounds=problem['bounds'],
+                      constraints=[{'type': 'ineq', 'fun': con}])
+    assert result.success
+    _assert_at_optimum(result, problem)
+    assert result.nfev == calls['fun']
+    # one call per evaluated point plus 2n = 6 per central-difference gradient (n = 3)
+    assert result.nfev == result.n_evaluations + 6 * result.njev
+    assert result.nfev_fd == 6 * result.njev
+    assert result.njev == result.nit  # one gradient per iteration
+    assert result.constr_nfev == [calls['con']]
+    assert result.constr_nfev == [result.n_evaluations + result.ncev_fd]
+    assert result.constr_njev == [0]  # no jac given: differences only (trust-constr's count)
+
+
+def test_nfev_with_jac_true_counts_one_call_per_point():
+    # fun returns (f, grad): the gradient at an evaluated point reuses that call, as
+    # SciPy's MemoizeJac does, so every call of fun is one point (nfev = evaluations).
+    problem = hs71()
+    calls = []
+
+    def fun_and_grad(x):
+        calls.append(np.copy(x))
+        return problem['fun'](x), problem['jac'](x)
+
+    result = minimize(fun_and_grad, problem['x0'], jac=True, bounds=problem['bounds'],
+                      constraints=problem['constraints'])
+    reference = _solve(problem)
+    np.testing.assert_array_equal(result.x, reference.x)  # same run as with jac=callable
+    assert result.nfev == len(calls) == result.n_evaluations == reference.nfev
+    assert result.njev == result.nit
+    assert len({c.tobytes() for c in calls}) == len(calls)  # never twice at one point
+
+
+def test_x0_outside_the_bounds_is_clipped_into_them():
+    # HS71's bounds are 1 <= x <= 5; (0, 6, 7, -2) clips to (1, 5, 5, 1), HS71's own
+    # start (Hock and Schittkowski 1981), so the run is exactly the standard one.
+    problem = hs71()
+    standard = _solve(problem)
+    calls = []
+
+    def fun(x):
+        calls.append(np.copy(x))
+        return problem['fun'](x)
+
+    clipped = minimize(fun, [0.0, 6.0, 7.0, -2.0], jac=problem['jac'],
+                       bounds=problem['bounds'], constraints=problem['constraints'])
+    np.testing.assert_array_equal(calls[0], [1.0, 5.0, 5.0, 1.0])
+    np.testing.assert_array_equal(clipped.history[0]['x'], [1.0, 5.0, 5.0, 1.0])
+    np.testing.assert_array_equal(clipped.x, standard.x)
+    assert clipped.success
+    _assert_at_optimum(clipped, problem)
+    assert all(np.all((c >= 1.0) & (c <= 5.0)) for c in calls)
+    # HS35 (x >= 0) from (-1, 2, -3), clipped to (0, 2, 0): still the optimum, with
+    # finite differences too
+    problem = hs35()
+    problem['x0'] = [-1.0, 2.0, -3.0]
+    result = _solve(problem, jac=None)
+    np.testing.assert_array_equal(result.history[0]['x'], [0.0, 2.0, 0.0])
+    assert result.success
+    _assert_at_optimum(result, problem)
 
 
 def test_paper_convention_counts_gradient_source_by_name():
@@ -141,7 +217,7 @@ def test_never_evaluates_outside_bounds(name, jac):
         bounds=problem['bounds'],
         constraints=problem['constraints'],
     )
-    assert len(calls) == result_guarded.nfev + result_guarded.nfev_fd
+    assert len(calls) == result_guarded.nfev  # every call, differences included
     np.testing.assert_array_equal(result_guarded.x, result.x)  # deterministic
     # The bounded problems end on a bound: x1 = 2 (HS21), x1 = 1 (HS71), x1 = 0.5.
     assert np.min(np.minimum(result.x - lower, upper - result.x)) <= 1e-6
@@ -184,8 +260,11 @@ def test_callback_stops_the_run(how):
     assert len(result.history) == 4
 
 
-def test_resume_from_history_gives_same_answer_as_uninterrupted_run():
+@pytest.mark.parametrize('jac', ['analytic', 'central_difference'])
+def test_resume_from_history_gives_same_answer_as_uninterrupted_run(jac):
     problem = hs71()
+    if jac == 'central_difference':
+        problem['jac'] = None
     full = _solve(problem)
     partial = _solve(problem, callback=lambda intermediate_result: intermediate_result.nit == 3)
     assert partial.nit == 3 < full.nit
@@ -194,7 +273,8 @@ def test_resume_from_history_gives_same_answer_as_uninterrupted_run():
     assert resumed.fun == full.fun
     assert resumed.nit == full.nit
     # Counters are cumulative over the interrupted and the resumed parts.
-    assert resumed.nfev == full.nfev
+    for name in ('nfev', 'nfev_fd', 'n_evaluations', 'njev', 'constr_nfev', 'constr_njev'):
+        assert resumed[name] == full[name], name
     assert resumed.ngev_by_source == full.ngev_by_source
 
 
@@ -256,8 +336,10 @@ def test_bad_input_raises_value_error():
         minimize(problem['fun'], [np.nan, 0.5, 0.5])
     with pytest.raises(ValueError, match='inverted'):
         minimize(problem['fun'], [0.5, 0.5, 0.5], bounds=[(1.0, 0.0)] * 3)
-    with pytest.raises(ValueError, match='outside the bounds'):
-        minimize(problem['fun'], [-1.0, 0.5, 0.5], bounds=[(0.0, 1.0)] * 3)
+    with pytest.raises(ValueError, match='finite'):
+        minimize(problem['fun'], [np.inf, 0.5, 0.5], bounds=[(0.0, 1.0)] * 3)
+    with pytest.raises(ValueError, match='outside the bounds'):  # ask/tell: no clipping
+        DynamicQ([-1.0, 0.5, 0.5], [0.0] * 3, [1.0] * 3)
     with pytest.raises(ValueError, match='pairs'):
         minimize(problem['fun'], [0.5, 0.5, 0.5], bounds=[(0.0, 1.0)] * 2)
     with pytest.raises(ValueError, match='unknown Dynamic-Q option'):

@@ -68,14 +68,14 @@ def test_node_starts_via_ament_lookup_and_stops_on_sigint(name, ros_context, exe
             time.sleep(0.2)
         else:
             pytest.fail(f'{name} did not appear on the graph within 30 s')
-        time.sleep(1.0)  # helper nodes of the same process (closed loop, callers) too
+        time.sleep(1.0)  # any other node of the process would be on the graph by now
         names = observer.get_node_names()
     finally:
         process.send_signal(signal.SIGINT)
         output, _ = process.communicate(timeout=20)
     assert process.returncode == 0, output
-    # The global rename applies to the node, not to its helper nodes: one node of the
-    # name, and rcl did not have to share a rosout logger between two of them.
+    # Each executable is one node: one node of the name, and rcl did not have to
+    # share a rosout logger between two of them.
     assert names.count(f'{name}_under_test') == 1, names
     assert 'Publisher already registered' not in output, output
 

@@ -5,19 +5,13 @@ simulated by the same deterministic model, only the transport differs.
 """
 
 import re
-import threading
 
 import numpy as np
 import pytest
 
+from suspension_tuning.testing import wait_for_future as wait
+
 pytestmark = pytest.mark.ros
-
-
-def wait(future, timeout_s=120.0):
-    done = threading.Event()
-    future.add_done_callback(lambda _: done.set())
-    assert done.wait(timeout_s), 'no answer in time'
-    return future.result()
 
 
 def call(client, request, timeout_s=120.0):
@@ -109,16 +103,16 @@ def test_coordinator_action_with_full_gradients_equals_in_process(ros_context, e
 def test_a_destroyed_coordinator_leaves_no_action_server_behind(ros_context, ros_domain_id):
     """rclpy's Node.destroy_node leaves action servers alone; a stale ``optimise``
     server would take the goals of a later ``tune`` and never answer them."""
-    import time
+    from contextlib import ExitStack
 
     import rclpy
     from rclpy.action import get_action_names_and_types
-    from rclpy.context import Context
 
     from suspension_tuning.nodes.coordinator import CoordinatorNode
+    from suspension_tuning.testing import isolated_context, wait_until
 
-    other = Context()
-    rclpy.init(context=other, domain_id=ros_domain_id)
+    cleanup = ExitStack()
+    other = cleanup.enter_context(isolated_context(ros_domain_id))  # a second process, as it were
     watcher = rclpy.create_node('watcher', context=other)
 
     # A namespace of its own: a coordinator left by another test or process on this
@@ -127,12 +121,6 @@ def test_a_destroyed_coordinator_leaves_no_action_server_behind(ros_context, ros
         return any(name == '/destroy_test/coordinator/optimise'
                    for name, _ in get_action_names_and_types(watcher))
 
-    def wait_until(condition, timeout_s: float = 10.0) -> bool:
-        deadline = time.monotonic() + timeout_s
-        while not condition() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        return condition()
-
     try:
         coordinator = CoordinatorNode(context=ros_context, namespace='/destroy_test')
         assert wait_until(seen), 'the coordinator never appeared'
@@ -140,4 +128,4 @@ def test_a_destroyed_coordinator_leaves_no_action_server_behind(ros_context, ros
         assert wait_until(lambda: not seen()), 'the destroyed coordinator is still seen'
     finally:
         watcher.destroy_node()
-        rclpy.try_shutdown(context=other)
+        cleanup.close()

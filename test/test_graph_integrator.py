@@ -1,19 +1,12 @@
 """The full-model integrator through the graph: a service field, a node parameter and the
 Optimise goal field; the graph gives the same bits as the in-process model."""
 
-import threading
-
 import numpy as np
 import pytest
 
+from suspension_tuning.testing import wait_for_future as wait
+
 pytestmark = pytest.mark.ros
-
-
-def wait(future, timeout_s=120.0):
-    done = threading.Event()
-    future.add_done_callback(lambda _: done.set())
-    assert done.wait(timeout_s), 'no answer in time'
-    return future.result()
 
 
 def call(client, request, timeout_s=120.0):

@@ -1,13 +1,11 @@
 """The whole graph in one process (``ros2 run suspension_tuning graph``, ``make demo``).
 
-``graph.build_nodes`` puts the first simulation worker's ``evaluate``, the gradient
-evaluator's services, the coordinator's action server and its goals on one thread
-(the model loop): a goal is taken and run there, its calls to those services are
-answered on its own thread, and cancel and result requests are answered while it
-waits for a service.  A 2-variable
-ride optimisation through it must reach the in-process bits, with every call made
-over the middleware as before (the services count their calls), and a cancel must
-stop it.
+The nodes of ``graph.build_nodes``, each on the executor it asks for
+(``graph.SpinningGraph``): a goal runs in the coordinator's execute callback and
+waits there for the services of the other nodes, over the middleware as between
+processes.  A 2-variable ride optimisation through it must reach the in-process
+bits (the services count their calls), and a cancel must stop it, also of a goal
+queued behind another.
 """
 
 import threading
@@ -22,38 +20,18 @@ SAMPLES = 12  # fewer than the paper's 30 to keep the test short; same code path
 RESULT_TIMEOUT_S = 1.0  # results kept 1 s after their goal ends (config: 10 s)
 
 
-def _nodes(context, calibration_dir, model_loop: bool):
-    """The graph's nodes as ``build_nodes`` makes them, or each with threads of its own."""
-    from suspension_tuning.graph import build_nodes
-    from suspension_tuning.nodes.coordinator import CoordinatorNode
-    from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
-    from suspension_tuning.nodes.gradient_evaluator import GradientEvaluatorNode
-
-    gradient_params = [Parameter('calibration_dir', value=str(calibration_dir))]
-    coordinator_params = [Parameter('calibration_samples', value=SAMPLES),
-                          Parameter('result_timeout_s', value=RESULT_TIMEOUT_S)]
-    if model_loop:
-        return build_nodes(workers=1, record=False, context=context, overrides={
-            'gradient_evaluator': gradient_params, 'coordinator': coordinator_params})
-    return [FullVehicleSimNode(context=context),
-            GradientEvaluatorNode(context=context, parameter_overrides=gradient_params),
-            CoordinatorNode(context=context, parameter_overrides=coordinator_params)]
-
-
-@pytest.fixture(params=['model_loop', 'goal_threads'])
-def one_process_graph(request, ros_context, tmp_path):
-    """(nodes, coordinator, client node, goal threads, graph): spinning, no recorder.
-
-    Every node on a SingleThreadedExecutor (``graph.SpinningGraph``); the
-    coordinator's goals on the model loop (``build_nodes``) or on goal threads of
-    its own (the nodes as ``ros2 run`` starts them).
-    """
+@pytest.fixture
+def one_process_graph(ros_context, tmp_path):
+    """(nodes, coordinator, client node, goal threads, graph): spinning, no recorder."""
     from rclpy.node import Node
 
-    from suspension_tuning.graph import SpinningGraph
+    from suspension_tuning.graph import SpinningGraph, build_nodes
     from suspension_tuning.nodes.coordinator import CoordinatorNode
 
-    nodes = _nodes(ros_context, tmp_path, request.param == 'model_loop')
+    nodes = build_nodes(workers=1, record=False, context=ros_context, overrides={
+        'gradient_evaluator': [Parameter('calibration_dir', value=str(tmp_path))],
+        'coordinator': [Parameter('calibration_samples', value=SAMPLES),
+                        Parameter('result_timeout_s', value=RESULT_TIMEOUT_S)]})
     coordinator = next(n for n in nodes if isinstance(n, CoordinatorNode))
     goal_threads: list[int] = []
     execute = coordinator._execute
@@ -75,7 +53,7 @@ def _send(client_node, goal, feedback_callback=None):
     from rclpy.action import ActionClient
     from suspension_tuning_interfaces.action import Optimise
 
-    from suspension_tuning.nodes._service_calls import wait_future
+    from suspension_tuning.nodes._spin import wait_future
 
     client = ActionClient(client_node, Optimise, '/coordinator/optimise')
     assert client.wait_for_server(timeout_sec=10.0)
@@ -83,57 +61,33 @@ def _send(client_node, goal, feedback_callback=None):
                        30.0)
 
 
-@pytest.mark.parametrize('one_process_graph', ['model_loop'], indirect=True)
 def test_ride_optimisation_through_the_one_process_graph_gives_the_in_process_bits(
         one_process_graph, in_process_optimum):
     from suspension_tuning_interfaces.action import Optimise
 
-    from suspension_tuning.nodes._service_calls import wait_future
+    from suspension_tuning.nodes._spin import wait_future
 
-    nodes, coordinator, client_node, goal_threads, _ = one_process_graph
+    nodes, coordinator, client_node, goal_threads, graph = one_process_graph
     feedback = []
     handle = _send(client_node, Optimise.Goal(scenario='ride', n_vars=2,
                                               gradient_source='simplified'),
                    feedback.append)
     result = wait_future(handle.get_result_async(), 300.0).result
     assert result.success, result.message
-    assert goal_threads == [coordinator.goal_loop._thread.ident]  # on the model loop
-    # Every full run went over the middleware: the calibration batch, one per
-    # iteration evaluated, and the telemetry run of the optimum (final_telemetry).
-    assert nodes[0].evaluate_service.calls == 1 + len(result.history) + 1
-    assert len(feedback) == len(result.history)
+    # Not on the thread that spins the coordinator's executor (a thread of its pool).
+    executor_thread = graph.threads[graph.nodes.index(coordinator)]
+    assert len(goal_threads) == 1 and goal_threads[0] != executor_thread.ident
+    # Every full run went over the middleware: the calibration batch (its 12 samples in
+    # two chunks of calibration_chunk = 6, config/graph.yaml), one per iteration
+    # evaluated, and the telemetry run of the optimum (final_telemetry).
+    assert nodes[0].evaluate_calls == 2 + len(result.history) + 1
+    assert [m.feedback.phase for m in feedback].count('iteration') == len(result.history)
     assert result.n_calibration_runs == SAMPLES
     local = in_process_optimum(coordinator.options.as_dict(), SAMPLES)
     np.testing.assert_array_equal(result.x, local.x)
     assert result.f == local.f
 
 
-@pytest.mark.parametrize('one_process_graph', ['model_loop'], indirect=True)
-def test_the_model_loop_takes_the_goal_not_the_coordinators_executor(one_process_graph):
-    """The goal request is accepted on the model loop, which then runs the goal."""
-    from suspension_tuning_interfaces.action import Optimise
-
-    from suspension_tuning.nodes._service_calls import wait_future
-
-    _, coordinator, client_node, goal_threads, graph = one_process_graph
-    accepted_on = []
-    accept = coordinator.server._goal_callback
-
-    def recording_accept(goal):
-        accepted_on.append(threading.get_ident())
-        return accept(goal)
-
-    coordinator.server.register_goal_callback(recording_accept)
-    assert coordinator.server not in list(coordinator.waitables)  # not the executor's
-    handle = _send(client_node, Optimise.Goal(scenario='bumpy', n_vars=2))
-    answer = wait_future(handle.get_result_async(), 30.0)
-    assert "unknown scenario 'bumpy'" in answer.result.message
-    loop_thread = coordinator.goal_loop._thread.ident
-    assert accepted_on == [loop_thread] and goal_threads == [loop_thread]
-    assert graph.threads[graph.nodes.index(coordinator)].ident != loop_thread
-
-
-@pytest.mark.parametrize('one_process_graph', ['model_loop'], indirect=True)
 def test_handling_optimisation_passes_the_full_runs_inputs_to_the_gradient(
         one_process_graph, in_process_optimum):
     """Paper 6.1: the simplified handling model runs on the full run's steering and
@@ -142,7 +96,7 @@ def test_handling_optimisation_passes_the_full_runs_inputs_to_the_gradient(
     where the inputs are handed over as arrays."""
     from suspension_tuning_interfaces.action import Optimise
 
-    from suspension_tuning.nodes._service_calls import wait_future
+    from suspension_tuning.nodes._spin import wait_future
 
     _, coordinator, client_node, _, _ = one_process_graph
     handle = _send(client_node, Optimise.Goal(scenario='handling', n_vars=2,
@@ -162,7 +116,7 @@ def test_a_goal_is_cancelled_between_iterations(one_process_graph):
     from action_msgs.msg import GoalStatus
     from suspension_tuning_interfaces.action import Optimise
 
-    from suspension_tuning.nodes._service_calls import wait_future
+    from suspension_tuning.nodes._spin import wait_future
 
     _, coordinator, client_node, goal_threads, graph = one_process_graph
     first = threading.Event()
@@ -173,8 +127,7 @@ def test_a_goal_is_cancelled_between_iterations(one_process_graph):
                    lambda _: first.set())
     assert first.wait(120.0), 'no feedback'
     cancel = wait_future(handle.cancel_goal_async(), 30.0)
-    # Accepted while the goal waited for a service (model loop) or by the coordinator's
-    # executor (goal threads).
+    # Accepted by another thread of the coordinator's executor while the goal runs.
     assert len(cancel.goals_canceling) == 1
     answer = wait_future(handle.get_result_async(), 300.0)
     assert answer.status == GoalStatus.STATUS_CANCELED
@@ -193,7 +146,7 @@ def test_a_result_asked_for_after_the_goal_ended_still_comes(one_process_graph):
     from action_msgs.msg import GoalStatus
     from suspension_tuning_interfaces.action import Optimise
 
-    from suspension_tuning.nodes._service_calls import wait_future
+    from suspension_tuning.nodes._spin import wait_future
 
     _, _, client_node, goal_threads, _ = one_process_graph
     handle = _send(client_node, Optimise.Goal(scenario='bumpy', n_vars=2))
@@ -209,14 +162,14 @@ def test_a_result_asked_for_after_the_goal_ended_still_comes(one_process_graph):
 
 def test_a_result_is_forgotten_result_timeout_after_its_goal_ended(one_process_graph):
     """rcl expires an ended goal after ``result_timeout_s`` (its timer is waited on by
-    whoever takes the action's requests: the model loop or the executor): a result
+    the coordinator's executor): a result
     asked for later is UNKNOWN, and the goal no longer appears in the status."""
     import time
 
     from action_msgs.msg import GoalStatus
     from suspension_tuning_interfaces.action import Optimise
 
-    from suspension_tuning.nodes._service_calls import wait_future
+    from suspension_tuning.nodes._spin import wait_future
 
     _, coordinator, client_node, _, _ = one_process_graph
     handle = _send(client_node, Optimise.Goal(scenario='bumpy', n_vars=2))
@@ -231,14 +184,13 @@ def test_a_result_is_forgotten_result_timeout_after_its_goal_ended(one_process_g
     assert late.status == GoalStatus.STATUS_UNKNOWN
 
 
-@pytest.mark.parametrize('one_process_graph', ['model_loop'], indirect=True)
 def test_a_goal_cancelled_while_queued_behind_another_never_runs(one_process_graph):
-    """Goals on the model loop run one after another; one cancelled while it waits
+    """Goals run one after another; one cancelled while it waits
     ends at its start, without a model run, and the running goal is not disturbed."""
     from action_msgs.msg import GoalStatus
     from suspension_tuning_interfaces.action import Optimise
 
-    from suspension_tuning.nodes._service_calls import wait_future
+    from suspension_tuning.nodes._spin import wait_future
 
     _, _, client_node, goal_threads, _ = one_process_graph
     first = threading.Event()
@@ -257,3 +209,34 @@ def test_a_goal_cancelled_while_queued_behind_another_never_runs(one_process_gra
     assert late.result.message == 'cancelled before it started'
     assert late.result.n_full_runs == 0 and len(late.result.history) == 0
     assert len(goal_threads) == 2  # both went through the execute callback, in order
+
+
+def test_a_node_of_ones_own_takes_the_place_of_the_graphs(ros_context):
+    """``build_nodes(factories=...)``: the graph's parameters and overrides reach it;
+    a factory for a node the graph does not have is an error."""
+    from rclpy.node import Node
+
+    from suspension_tuning.graph import build_nodes
+    from suspension_tuning.nodes.valve_controller import ValveControllerNode
+
+    class OwnController(Node):
+        def __init__(self, **kwargs):
+            super().__init__('valve_controller', **kwargs)
+            self.declare_parameter('gain', 0.0)
+
+    nodes = build_nodes(record=False, context=ros_context,
+                        overrides={'valve_controller': [Parameter('gain', value=2.5)]},
+                        factories={'valve_controller': OwnController})
+    try:
+        [own] = [node for node in nodes if node.get_name() == 'valve_controller']
+        assert isinstance(own, OwnController)
+        assert not any(isinstance(node, ValveControllerNode) for node in nodes)
+        assert own.get_parameter('gain').value == 2.5
+        assert [node.get_name() for node in nodes] == [
+            'full_vehicle_sim', 'gradient_evaluator', 'valve_controller', 'coordinator']
+    finally:
+        for node in nodes:
+            node.destroy_node()
+    with pytest.raises(ValueError, match='no node valve_controler in the graph'):
+        build_nodes(record=False, context=ros_context,
+                    factories={'valve_controler': OwnController})  # misspelt: not added

@@ -6,22 +6,16 @@ simplified runs per iteration.  The same loop in-process gives the same bits.
 """
 
 import re
-import threading
 
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
+from suspension_tuning.testing import wait_for_future as wait
+
 pytestmark = pytest.mark.ros
 
 SAMPLES = 12  # fewer than the paper's 30 to keep the test short; same code path
-
-
-def wait(future, timeout_s=300.0):
-    done = threading.Event()
-    future.add_done_callback(lambda _: done.set())
-    assert done.wait(timeout_s), 'no answer in time'
-    return future.result()
 
 
 @pytest.fixture
@@ -62,7 +56,14 @@ def test_ride_optimisation_with_simplified_gradients_converges_through_the_graph
     iterations_evaluated = len(result.history)
     assert result.n_full_runs == iterations_evaluated
     assert result.n_simplified_runs % (2 * n) == 0 and result.n_simplified_runs > 0
-    assert len(feedback) == len(result.history)
+    phases = [message.feedback.phase for message in feedback]
+    assert phases.count('iteration') == len(result.history)
+    # The calibration's progress comes first, a step per calibration_chunk (6 designs,
+    # config/graph.yaml) of the 12 samples.
+    calibration = [(m.feedback.calibration.samples_done, m.feedback.calibration.samples_total)
+                   for m in feedback if m.feedback.phase == 'calibration']
+    assert calibration == [(6, SAMPLES), (SAMPLES, SAMPLES)]
+    assert phases[:2] == ['calibration', 'calibration']
     # The same loop in-process, with the in-process eq. 25 calibration: same bits.
     local = in_process_optimum(graph['coordinator'].options.as_dict(), SAMPLES)
     np.testing.assert_array_equal(result.x, local.x)

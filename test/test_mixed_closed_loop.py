@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from suspension_tuning import evaluation
+from suspension_tuning.testing import call_service
 from suspension_tuning.vehicle.valve_logic import HANDLING_STATE, RIDE_STATE
 
 DESIGN = np.array([[0.5005, 0.5005]])
@@ -65,13 +66,8 @@ def test_closed_loop_over_topics_gives_the_in_process_bits(ros_context, executor
     client_node.create_subscription(ValveState, '/suspension/valve_state',
                                     actuals.append, RELIABLE)
     client = client_node.create_client(EvaluateDesign, '/full_vehicle_sim/evaluate')
-    assert client.wait_for_service(timeout_sec=10.0)
-    done = threading.Event()
-    future = client.call_async(EvaluateDesign.Request(
-        scenario='mixed', n_vars=2, designs=DESIGN.ravel().tolist()))
-    future.add_done_callback(lambda _: done.set())
-    assert done.wait(240.0)
-    response = future.result()
+    response = call_service(client, EvaluateDesign.Request(
+        scenario='mixed', n_vars=2, designs=DESIGN.ravel().tolist()), timeout_s=240.0)
     assert response.success, response.error
     np.testing.assert_array_equal(response.f, in_process.f)  # same bits as in-process
     np.testing.assert_array_equal(np.reshape(response.g, (1, 4)), in_process.g)

@@ -10,16 +10,9 @@ import time
 import pytest
 import yaml
 
+from suspension_tuning.testing import wait_until as wait_for
+
 pytestmark = pytest.mark.ros
-
-
-def wait_for(predicate, timeout=15.0, period=0.05):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(period)
-    return predicate()
 
 
 def latched_qos():
@@ -49,9 +42,13 @@ def recorder(ros_context, tmp_path, **params):
     )
 
 
-def test_records_topics_service_events_and_action_feedback_and_status(
-    ros_context, executor, tmp_path, request
-):
+def record_session(ros_context, executor, tmp_path, request):
+    """Record progress, IMU, a service's events and an action's topics; return the bag path.
+
+    A fake graph publishes 20 progress records and 20 IMU messages, calls an
+    introspected EvaluateDesign service once and runs one Optimise goal (3 feedback
+    messages) while the recorder records one session bag.
+    """
     from rclpy.action import ActionClient, ActionServer
     from rclpy.callback_groups import ReentrantCallbackGroup
     from rclpy.node import Node
@@ -61,8 +58,6 @@ def test_records_topics_service_events_and_action_feedback_and_status(
     from suspension_tuning_interfaces.action import Optimise
     from suspension_tuning_interfaces.msg import IterationRecord
     from suspension_tuning_interfaces.srv import EvaluateDesign
-
-    from suspension_tuning.bag.reader import decode, read_messages
 
     node = recorder(ros_context, tmp_path, per_run=False, bag_name='session')
     graph = Node('graph_under_test', context=ros_context)
@@ -147,7 +142,15 @@ def test_records_topics_service_events_and_action_feedback_and_status(
     time.sleep(0.3)  # the status update of the finished goal
     path = node.session.bag.path
     node.close()
+    return path
 
+
+def test_records_topics_service_events_and_action_feedback_and_status(
+    ros_context, executor, tmp_path, request
+):
+    from suspension_tuning.bag.reader import decode, read_messages
+
+    path = record_session(ros_context, executor, tmp_path, request)
     contents = read_messages(path)
     assert contents.complete
     got = contents.counts()
@@ -198,6 +201,26 @@ def test_records_topics_service_events_and_action_feedback_and_status(
     assert imu_qos['reliability'] == 'best_effort'  # the publisher's offer, sensor data
     status_qos = channels['/coordinator/optimise/_action/status'].offered_qos_profiles[0]
     assert status_qos['durability'] == 'transient_local'  # action status is latched
+
+
+def test_recorded_bag_decodes_with_foxglove_parser_and_cdr_reader(
+    foxglove_check, ros_context, executor, tmp_path, request
+):
+    path = record_session(ros_context, executor, tmp_path, request)
+    [result] = foxglove_check([path])
+    assert result['complete']
+    errors = {c['topic']: c['error'] for c in result['channels'] if c['error']}
+    assert not errors
+    counts = {c['topic']: (c['decoded'], c['messages']) for c in result['channels']}
+    # every channel of the session, service events and action topics included, and
+    # every one of its messages (counts as in the test above)
+    assert counts['/optimisation/progress'] == (20, 20)
+    assert counts['/sim_0/telemetry/imu'] == (20, 20)
+    assert counts['/sim_0/evaluate/_service_event'] == (2, 2)
+    assert counts['/coordinator/optimise/_action/feedback'] == (3, 3)
+    decoded, recorded = counts['/coordinator/optimise/_action/status']
+    assert decoded == recorded >= 2
+    assert result['ok']
 
 
 def test_per_run_opens_a_bag_at_run_config_and_closes_it_at_result(
@@ -286,7 +309,7 @@ def publish_and_wait_recorded(ros_context, executor, process, tmp_path, n):
     talker = Node('talker_under_test', context=ros_context)
     executor.add(talker)
     publisher = talker.create_publisher(String, '/chatter', 100)
-    assert wait_for(lambda: publisher.get_subscription_count() > 0, timeout=30.0), process.poll()
+    assert wait_for(lambda: publisher.get_subscription_count() > 0, timeout_s=30.0), process.poll()
     for k in range(n):
         publisher.publish(String(data=f'message {k}'))
         time.sleep(0.01)
@@ -294,7 +317,7 @@ def publish_and_wait_recorded(ros_context, executor, process, tmp_path, n):
     # the node flushes the open chunk every 0.2 s: all n are on disk soon after
     assert wait_for(
         lambda: mcap.is_file() and len(read_messages(mcap, topics=['/chatter']).messages) == n,
-        timeout=10.0,
+        timeout_s=10.0,
     )
     return mcap
 

@@ -1,5 +1,6 @@
-"""Tests of the ISO 8608 road synthesis, bumps and flat road (physics-reference 6)."""
+"""Tests of the road synthesis (ISO 8608, sett paving), bumps and flat road (physics-ref 6)."""
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -9,10 +10,14 @@ from scipy import signal, special
 from suspension_tuning.vehicle.road import (
     RoadProfile,
     RoadSpec,
+    SettPavingSpec,
     discrete_bump,
     iso8608_psd,
     left_right_coherence,
     load_road_spec,
+    road_spec_from_yaml_dict,
+    sett_height_psd,
+    sett_layer,
     smooth_road,
     synthesise_tracks,
 )
@@ -35,10 +40,20 @@ def hand_band_variance(gd0, n0, w, n1, n2):
     return gd0 * n0**w * (n1 ** (1 - w) - n2 ** (1 - w)) / (w - 1)
 
 
-def test_config_belgian_paving_matches_paper():
-    s = load_road_spec('belgian_paving', CONFIG)
+def test_config_paper_literal_paving_matches_paper():
+    s = load_road_spec('belgian_paving_paper_iso8608', CONFIG)
+    assert type(s) is RoadSpec
     assert s.gd_n0_m3 == 1e-4 and s.waviness == 4.0  # paper section 5.2
     assert s.n0_cyc_per_m == 0.1  # ISO 8608 reference frequency
+
+
+def test_config_belgian_paving_is_setts_on_the_papers_iso_bed():
+    s = load_road_spec('belgian_paving', CONFIG)
+    assert isinstance(s, SettPavingSpec)
+    assert s.gd_n0_m3 == 1e-4 and s.waviness == 4.0  # the bed: paper section 5.2
+    # the identified height spread lies well inside the identification's search interval
+    # (8-14 mm, studies/road_identification.py)
+    assert 0.008 < s.sett_height_std_m < 0.014
 
 
 def test_rms_equals_integral_of_psd_over_band():
@@ -219,3 +234,109 @@ def test_bad_specs_raise():
         RoadSpec.from_yaml_dict({'gd_n0': 1e-4})
     with pytest.raises(ValueError, match='overlap'):
         discrete_bump(0.1, 2.0, [10.0, 11.0], road_length_m=40.0)
+
+
+# ---- sett paving ---------------------------------------------------------------------
+SETT = SettPavingSpec(length_m=100.0, dx_m=0.005, seed=3, ramp_in_m=0.0)
+
+
+def test_sett_paving_without_stones_is_the_iso_road_bit_for_bit():
+    # the stone layer has its own random stream, so the bed equals the ISO road of the
+    # same base fields (and a zero layer adds exactly nothing)
+    flat_setts = SettPavingSpec(
+        length_m=100.0, seed=3, sett_height_std_m=0.0, joint_depth_m=0.0, ramp_in_m=5.0
+    )
+    iso = RoadSpec(length_m=100.0, seed=3, ramp_in_m=5.0)
+    a, b = synthesise_tracks(flat_setts), synthesise_tracks(iso)
+    assert a.z_left_m.tobytes() == b.z_left_m.tobytes()
+    assert a.z_right_m.tobytes() == b.z_right_m.tobytes()
+
+
+def test_sett_paving_same_seed_same_bits_and_different_seed_differs():
+    a, b = synthesise_tracks(SETT), synthesise_tracks(SETT)
+    assert a.z_left_m.tobytes() == b.z_left_m.tobytes()
+    assert a.z_right_m.tobytes() == b.z_right_m.tobytes()
+    c = synthesise_tracks(SettPavingSpec(length_m=100.0, dx_m=0.005, seed=4, ramp_in_m=0.0))
+    assert not np.array_equal(a.z_left_m, c.z_left_m)
+
+
+def test_stone_tops_are_flat_with_the_configured_height_spread():
+    spec = SettPavingSpec(length_m=2000.0, dx_m=0.005, seed=7, joint_width_m=0.0)
+    zl, _ = sett_layer(spec, 400_000)
+    steps = np.flatnonzero(np.diff(zl) != 0)  # stone edges: the layer is piecewise flat
+    pitches = np.diff(steps) * spec.dx_m
+    # pitch uniform in 0.14 (1 -/+ 0.3) = 0.098-0.182 m, to one sample (5 mm)
+    assert pitches.min() >= 0.098 - 0.005 and pitches.max() <= 0.182 + 0.005
+    assert pitches.mean() == pytest.approx(0.14, rel=0.01)  # ~14 000 stones: 0.2 % scatter
+    tops = zl[steps[:-1] + 1]
+    # ~14 000 independent N(0, 10 mm) heights: the sample std scatters by 0.6 %
+    assert np.std(tops) == pytest.approx(spec.sett_height_std_m, rel=0.03)
+
+
+def test_joint_floor_lies_below_the_lower_neighbour():
+    spec = SettPavingSpec(length_m=100.0, dx_m=0.005, seed=2, sett_length_spread=0.0,
+                          joint_width_m=0.02, joint_depth_m=0.004)  # fmt: skip
+    zl, _ = sett_layer(spec, 20_000)
+    z = zl + np.mean(sett_layer(dataclasses.replace(spec, joint_width_m=0.0), 20_000)[0])
+    # constant pitch 0.14 m of 28 samples, the last 4 (20 mm) a joint: the joint sits
+    # 4 mm below the lower of its two stones (mean removed, so compare differences)
+    levels = np.unique(np.round(np.diff(z), 12))
+    assert levels.size > 3
+    runs = np.split(z, np.flatnonzero(np.diff(z) != 0) + 1)
+    lengths = np.array([r.size for r in runs[1:-1]])
+    assert set(lengths) <= {24, 4}  # stone tops of 28 - 4 samples, joints of 4
+    for prev, joint, nxt in zip(runs[1:-3], runs[2:-2], runs[3:-1]):
+        if joint.size == 4:
+            assert joint[0] == pytest.approx(min(prev[0], nxt[0]) - 0.004, abs=1e-12)
+
+
+def test_sett_layer_psd_matches_the_renewal_formula():
+    # no joints: stone heights only.  G(0) = 2 sigma^2 E[L^2]/E[L], with E[L^2] =
+    # 0.14^2 (1 + 0.3^2/3) -> 2 (0.01)^2 0.14 (1.03) = 2.884e-5 m^3
+    spec = SettPavingSpec(length_m=4000.0, dx_m=0.005, seed=11, joint_width_m=0.0)
+    assert sett_height_psd(1e-4, spec) == pytest.approx(2.884e-5, rel=1e-3)
+    zl, zr = sett_layer(spec, 800_000)
+    for z in (zl, zr):
+        f, pxx = signal.welch(z, fs=1.0 / spec.dx_m, nperseg=20_000)  # 100 m segments
+        for a, b in [(0.1, 0.5), (0.5, 2.0), (2.0, 5.0), (5.0, 8.0)]:
+            m = (f >= a) & (f < b)
+            err_db = 10 * np.log10(pxx[m].mean() / sett_height_psd(f[m], spec).mean())
+            # ~28 000 stones: band averages within 0.5 dB (measured <= 0.2 dB)
+            assert abs(err_db) < 0.5, (a, b, err_db)
+
+
+def test_sett_layouts_set_the_left_right_relation():
+    n = 20_000
+    rows = sett_layer(SETT, n)
+    # rows: same course boundaries (the joints line up) but different stones
+    assert not np.array_equal(rows[0], rows[1])
+    edges_l = np.flatnonzero(np.diff(rows[0]) != 0)
+    edges_r = np.flatnonzero(np.diff(rows[1]) != 0)
+    assert np.isin(edges_r, edges_l).mean() > 0.99  # right-track edges on left-track edges
+    # independent stone heights: correlation ~ N(0, 1/sqrt(700 stones)) -> |r| < 0.15
+    assert abs(np.corrcoef(rows[0], rows[1])[0, 1]) < 0.15
+    ind = sett_layer(dataclasses.replace(SETT, sett_layout='independent'), n)
+    assert np.isin(np.flatnonzero(np.diff(ind[1]) != 0), edges_l).mean() < 0.5
+    same = sett_layer(dataclasses.replace(SETT, sett_layout='identical'), n)
+    assert np.array_equal(same[0], same[1])
+    # coherence_model 'identical' means z_right = z_left for the whole road
+    p = synthesise_tracks(dataclasses.replace(SETT, coherence_model='identical'))
+    assert np.array_equal(p.z_left_m, p.z_right_m)
+
+
+def test_road_yaml_entry_builds_the_named_model_and_rejects_bad_ones():
+    spec = road_spec_from_yaml_dict({'model': 'sett_paving', 'sett_height_std_m': 0.005})
+    assert isinstance(spec, SettPavingSpec) and spec.sett_height_std_m == 0.005
+    assert type(road_spec_from_yaml_dict({'gd_n0_m3': 2e-4})) is RoadSpec
+    with pytest.raises(ValueError, match='unknown road model'):
+        road_spec_from_yaml_dict({'model': 'cobbles'})
+    with pytest.raises(ValueError, match='unknown SettPavingSpec keys'):
+        road_spec_from_yaml_dict({'model': 'sett_paving', 'stone_mm': 10})
+    with pytest.raises(ValueError, match='sett_length_spread'):
+        SettPavingSpec(sett_length_spread=1.0)
+    with pytest.raises(ValueError, match='joint_width_m'):
+        SettPavingSpec(joint_width_m=0.1)  # wider than the shortest pitch 0.098 m
+    with pytest.raises(ValueError, match='sett_layout'):
+        SettPavingSpec(sett_layout='herringbone')
+    with pytest.raises(ValueError, match='sett_height_std_m'):
+        SettPavingSpec(sett_height_std_m=-0.01)

@@ -79,9 +79,11 @@ def test_handling_corners_have_sensible_trends(handling_corners):
     reason=(
         'model disagrees with the paper: corner first roll peaks 1.27-8.74 deg (paper '
         '1.4-12.2: the stiff/high-damping corner is 9 % below) and RMS roll rate 4.5-20.6 '
-        'deg/s (paper 0.8-5.7); a 9 deg roll oscillation at the 0.3-0.5 Hz lane-change '
-        'rate alone gives > 10 deg/s RMS, so the paper likely averaged over a longer '
-        'window; not tuned (see report)'
+        'deg/s (paper 0.8-5.7).  No window or definition reproduces the paper: over the '
+        'first lane change, the whole run or up to 20 s after the manoeuvre the corner '
+        'ratio stays 4.6-4.7 (paper 7.1), and rescaling by the window alone would need '
+        '218 s for the smallest corner but 91 s for the largest, against a 7 s manoeuvre '
+        '(studies/roll_rate_window.py); vehicle parameters not tuned'
     ),
 )
 def test_handling_corners_in_paper_ranges(handling_corners):
@@ -106,19 +108,33 @@ def test_ride_corners_physically_sensible_trends(ride_corners):
     np.testing.assert_allclose(ride_corners.g, 10 * (m['tyre_lift_off_fraction'] - 0.1))
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        'model disagrees with the paper: W_b RMS at the corners is 0.2-0.5 m/s^2 on the '
-        'synthesised Belgian paving (G_d0 = 1e-4 m^3, w = 4, 50 km/h), below the paper range '
-        '0.7-4.4 m/s^2; with w = 4 the RMS scales with speed^1.5, so 4.4 m/s^2 would need an '
-        'unphysical speed; the real paving has more short-wave content (see report)'
-    ),
-)
-def test_ride_corners_in_paper_range(ride_corners):
+def test_ride_corners_span_the_papers_range(ride_corners):
+    # paper section 5.2: the four corners of its validated model span 0.7-4.4 m/s^2.
+    # The paving's stone height spread is identified from exactly these two numbers
+    # (studies/road_identification.py, one parameter for two values), so this checks the
+    # identified road on the scenario's own seed; 25 % is the identification's accepted
+    # error (over 6 road seeds the smallest value scatters 0.67-0.84, the largest 3.8-4.6)
     m = ride_corners.metrics
-    for a in (m['a_rms_driver_mps2'], m['a_rms_passenger_mps2']):
-        assert np.all((a >= 0.7) & (a <= 4.4))
+    a = np.stack([m['a_rms_driver_mps2'], m['a_rms_passenger_mps2']])
+    assert a.min() == pytest.approx(0.7, rel=0.25)
+    assert a.max() == pytest.approx(4.4, rel=0.25)
+
+
+def test_ride_wants_low_damping_until_the_tyres_hop(ride_corners):
+    # on a rough paved track a little damping rides best (the damper transmits the
+    # stones' harshness), and tyre hop is what limits it [P s.5.3, Figs 7, 8, 16]
+    ad = ride_corners.metrics['a_rms_driver_mps2']
+    assert ad[LOW_D_SOFT] < ad[HIGH_D_SOFT]
+    g = ride_corners.g
+    # eq. 11 infeasible (more than 10 % of the time off the ground) at a low-damping
+    # corner, feasible at both high-damping corners
+    assert g[LOW_D_SOFT].max() > 0.0 and g[LOW_D_STIFF].max() > 0.0
+    assert g[HIGH_D_SOFT].max() <= 0.0 and g[HIGH_D_STIFF].max() <= 0.0
+    # ... and feasible at the centre of the design space (dpsf 1.55, 0.35 L)
+    centre = scenarios.run_scenario('ride', np.array([0.5, 0.5]), P)
+    assert centre.g.max() <= 0.0
+    # the constraint is active in between: some tyre leaves the ground at the centre
+    assert centre.metrics['tyre_lift_off_fraction'].max() > 0.0
 
 
 def test_histories_hold_the_channels_the_simplified_models_need(ride_corners):

@@ -3,9 +3,12 @@
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
 from suspension_tuning.nodes._spin import spin_until_shutdown
+
+
+class WaitSetError(RuntimeError):
+    """Stands for rclpy's RCLError (a RuntimeError) of a wait set on a dead context."""
 
 
 def _executor_failing_with_rcl_error(shut_down_first: bool):
@@ -18,7 +21,7 @@ def _executor_failing_with_rcl_error(shut_down_first: bool):
         # has shut the context down, and the next wait set cannot be built.
         if shut_down_first:
             context.shutdown()
-        raise _rclpy.RCLError('failed to initialize wait set: the given context is not valid')
+        raise WaitSetError('failed to initialize wait set: the given context is not valid')
 
     executor.spin = spin
     return context, executor
@@ -33,7 +36,7 @@ def test_a_wait_set_error_after_the_context_shut_down_is_a_clean_stop():
 def test_a_wait_set_error_while_the_context_is_up_is_raised():
     context, executor = _executor_failing_with_rcl_error(shut_down_first=False)
     try:
-        with pytest.raises(_rclpy.RCLError):
+        with pytest.raises(WaitSetError):
             spin_until_shutdown(executor)
     finally:
         context.shutdown()
@@ -47,7 +50,7 @@ def test_spinning_until_done_stops_when_the_condition_holds_or_the_context_goes(
         spins.append(timeout_sec)
         if len(spins) == 3:  # the third wait meets a context shut down under it
             context.shutdown()
-            raise _rclpy.RCLError('failed to initialize wait set')
+            raise WaitSetError('failed to initialize wait set')
 
     executor.spin_once = spin_once
     spin_until_shutdown(executor, until=lambda: False)
@@ -85,7 +88,7 @@ def test_a_guard_condition_destroyed_by_the_executors_shutdown_is_a_clean_stop()
             spin_until_shutdown(executor)
         guard = node.create_guard_condition(lambda: None)
         executor.spin = lambda: spin(shut_down_first=True)
-        spin_until_shutdown(executor)  # returns: no exception escapes
+        spin_until_shutdown(executor, stopped=lambda: True)  # returns: nothing escapes
     finally:
         node.destroy_node()
         context.shutdown()

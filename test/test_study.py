@@ -8,6 +8,8 @@ so the grid alone must find it.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -15,6 +17,7 @@ from suspension_tuning.bag.reader import read_messages
 from suspension_tuning.inspect_bag import summary
 from suspension_tuning.study import (
     StudyRun,
+    active_constraints,
     cost_ratios,
     grid_designs,
     main,
@@ -217,3 +220,18 @@ def test_study_run_configuration_names_the_integrator():
     config = run_config(run)
     assert config['integrator'] == 'variable_step'  # what the bag's run_config records
     assert config['method'] == 'slsqp' and config['eps'] == 0.07
+
+
+def test_active_constraints_are_those_within_the_tolerance_of_zero():
+    # ACTIVE_G_TOL = 0.05: g = -0.05 (9.5 % of the time off the ground) counts, -0.06 not
+    assert active_constraints([-0.06, -0.05, 0.0, 0.3]) == ['FR', 'RL', 'RR']
+    assert active_constraints([-1.0, -1.0, -1.0, -1.0]) == []
+
+
+def test_table_reports_active_tyre_hop_constraints_and_violation(case):
+    lane_change = markdown_tables([case], (SAMPLES,))
+    # the lane change lifts no tyre: every final point has g = -1, no active constraint
+    assert lane_change.count('| none | 0 |') == len(case['runs'])
+    run = dataclasses.replace(case['runs'][0], g=[-0.5, -0.04, 0.02, -1.0], max_violation=0.02)
+    table = markdown_tables([{**case, 'runs': [run, *case['runs'][1:]]}], (SAMPLES,))
+    assert '| -0.500 | -0.040 | +0.020 | -1.000 | FR, RL | 0.02 |' in table

@@ -29,6 +29,23 @@ def test_tune_prints_progress_and_the_physical_optimum(ros_context, executor):
     assert 'full-model runs:' in out
 
 
+def test_tune_prints_the_calibration_progress_before_the_first_iteration(start_tuning_graph):
+    # A fresh calibration directory (the kit's): the 12 samples are run, in steps of
+    # calibration_chunk = 6 designs (config/graph.yaml).
+    start_tuning_graph(parameters={'coordinator': {'calibration_samples': 12,
+                                                   'final_telemetry': False}})
+    tune = Path(sys.prefix) / 'bin' / 'tune'
+    run = subprocess.run([str(tune), '--scenario', 'ride', '--n-vars', '2',
+                          '--gradient', 'simplified', '--max-iterations', '1'],
+                         capture_output=True, text=True, timeout=300, env=os.environ.copy())
+    lines = run.stdout.splitlines()
+    calibration = [line for line in lines if line.startswith('calibration (eq. 25):')]
+    assert [line.split()[3] for line in calibration] == ['6/12', '12/12'], run.stdout + run.stderr
+    first_iteration = next(i for i, line in enumerate(lines) if line.startswith('iteration'))
+    assert lines.index(calibration[-1]) < first_iteration
+    assert 'calibration full-model runs: 12' in run.stdout
+
+
 def test_tune_without_a_coordinator_says_so(ros_context):
     tune = Path(sys.prefix) / 'bin' / 'tune'
     run = subprocess.run([str(tune), '--server-timeout', '1', '--action', '/nobody/optimise'],

@@ -15,16 +15,11 @@ import time
 import pytest
 from rclpy.parameter import Parameter
 
+from suspension_tuning.testing import wait_for_future as wait
+
 pytestmark = pytest.mark.ros
 
 TIMEOUT_S = 8.0  # worker declared dead after this (a 4-design handling batch takes < 1 s)
-
-
-def wait(future, timeout_s=300.0):
-    done = threading.Event()
-    future.add_done_callback(lambda _: done.set())
-    assert done.wait(timeout_s), 'no answer in time'
-    return future.result()
 
 
 def start_worker(name, log_dir):

@@ -1,30 +1,49 @@
-"""Complete ``ros2msg`` message definitions, as rosbag2 stores them in MCAP schemas.
+"""Complete ``ros2msg`` message definitions, written the way rosbag2 writes them.
 
-Format (ros2/rosbag2 ``docs/message_definition_encoding.md``; MCAP specification,
-appendix "ros2msg"): the top-level definition first, then every type it depends on,
-recursively, each preceded by a line of exactly 80 ``=`` characters and a line
-``MSG: pkg/kind/Type``.
+Format (MCAP specification, appendix "ros2msg"; ros2/rosbag2
+``docs/message_definition_encoding.md``): the top-level definition first, then every
+type it depends on, each preceded by a line of exactly 80 ``=`` characters and a line
+``MSG: <name>``.
 
-Where the text comes from:
+Which names, in which order: what rosbag2's recorder does (``rosbag2_cpp``
+``LocalMessageDefinitionSource::get_full_text``, Jazzy, and its test
+``test_local_message_definition_source.cpp``, which expects ``MSG:
+rosbag2_test_msgdefs/BasicMsg`` after a field ``rosbag2_test_msgdefs/BasicMsg b``):
+
+* a dependency is headed with the type name as the field spells it
+  (``std_msgs/Header``), a same-package relative name with the package prefixed
+  (``<package>/<Type>``); the example in rosbag2's encoding document shows
+  ``MSG: my_msgs/msg/BasicMsg``, but neither rosbag2's code nor Foxglove's parser
+  (``@foxglove/rosmsg``, which matches dependency names exactly) follows it;
+* the complex field types of one text are taken in sorted order (rosbag2 keeps them
+  in a ``std::set``), each followed at once by its own dependencies (depth first),
+  every name written once;
+* each text is appended as it is, after a newline: a file that ends in a newline
+  leaves an empty line before the next separator.
+
+Where the text of one type comes from:
 
 * ``pkg/msg/T``: the installed ``<share>/pkg/msg/T.msg`` file, verbatim (constants
   and comments kept);
 * ``pkg/srv/T_Request`` and ``_Response``: the sections of ``<share>/pkg/srv/T.srv``
   separated by ``---``; ``pkg/action/T_Goal``, ``_Result`` and ``_Feedback``: the
-  sections of ``<share>/pkg/action/T.action``;
+  sections of ``<share>/pkg/action/T.action`` (same-package names written out as
+  ``pkg/Name``, see :func:`_qualify`);
 * types with no interface file of their own (service events ``pkg/srv/T_Event``,
   ``pkg/action/T_FeedbackMessage``, ``T_SendGoal_Request``, ...): generated from the
   generated Python class (``SLOT_TYPES``), which is what the middleware serialises.
 
 Field types use the two-part form of the .msg format (``std_msgs/Header``), also for
 the nested types of service events and action messages (``pkg/EvaluateDesign_Request``
-in ``pkg/srv/EvaluateDesign_Event``): a .msg field cannot name the ``srv``/``action``
-namespace (the parsers of mcap-ros2-support and rosbags reject three-part field
-types).  Each dependency's ``MSG:`` header is therefore the name its field reference
-resolves to, ``pkg/msg/Name``: rosbags resolves ``pkg/Name`` to exactly that,
-mcap-ros2-support matches package and name.  Checked in test/test_bag_writer.py with
-both readers.  (rosbag2 itself finds no .msg file for ``T_Event`` types and leaves
-their definition empty or falls back to IDL.)
+in ``pkg/srv/EvaluateDesign_Event``, headed ``MSG: pkg/EvaluateDesign_Request``): a .msg
+field cannot name the ``srv``/``action`` namespace (the parsers of mcap-ros2-support,
+rosbags and Foxglove reject or misread three-part field types).  rosbag2 itself stores
+a service-event topic with the ``.srv`` text under ``SRV: pkg/srv/T`` (not the layout
+of the ``T_Event`` message on the wire) and finds no definition for action messages;
+the definitions here describe the bytes recorded.
+
+Bags written before this layout headed every dependency ``MSG: pkg/msg/Name``;
+:func:`rosbag2_form` rewrites such a definition text (used by ``reindex``).
 """
 
 from __future__ import annotations
@@ -33,6 +52,7 @@ import importlib
 import json
 import re
 import sys
+from collections.abc import Callable
 from functools import cache
 from pathlib import Path
 
@@ -198,19 +218,23 @@ def _nested_names(slot_type: object) -> list[str]:
     return _nested_names(inner) if inner is not None else []
 
 
-def _generated(full_name: str) -> tuple[str, list[str]]:
+def _generated(full_name: str) -> tuple[str, dict[str, str]]:
     """A .msg text generated from the Python class (no constants, no comments).
 
-    Returns the text and the full names of its dependencies (the short ``pkg/Name`` in
-    the text loses the ``srv``/``action`` namespace, the class still knows it).
+    Returns the text and, sorted, the referenced name -> full name of each type it
+    uses (the ``pkg/Name`` in the text loses the ``srv``/``action`` namespace, the
+    class still knows it).
     """
     msg_class = message_class(full_name)
     names = list(msg_class.get_fields_and_field_types())
     lines = [f'{_idl_to_msg(t)} {n}' for t, n in zip(msg_class.SLOT_TYPES, names)]
-    deps: list[str] = []
+    full: dict[str, str] = {}
     for slot_type in msg_class.SLOT_TYPES:
-        deps += [d for d in _nested_names(slot_type) if d not in deps]
-    return '\n'.join(lines) + '\n', deps
+        for nested in _nested_names(slot_type):
+            package, _, name = nested.split('/')
+            full[f'{package}/{name}'] = nested
+    text = '\n'.join(lines) + '\n'
+    return text, {ref: full[ref] for ref in referenced_names(text, full_name.split('/')[0])}
 
 
 def own_text(type_name: str) -> str:
@@ -230,14 +254,14 @@ def own_text(type_name: str) -> str:
 
 
 @cache
-def _own(full: str) -> tuple[str, list[str]]:
-    """Text of one type and the full names of the types its fields use."""
+def _own(full: str) -> tuple[str, dict[str, str]]:
+    """Text of one type and, sorted, referenced name -> full name of the types it uses."""
     package, kind, name = full.split('/')
     if kind == 'msg':
         path = _interface_file(package, 'msg', name)
         if path is not None:
             text = path.read_text()
-            return text, _dependencies(text, package)
+            return text, _file_dependencies(text, package)
         return _generated(full)
     stem, _, part = name.rpartition('_')
     suffixes = {'srv': ('Request', 'Response'), 'action': ('Goal', 'Result', 'Feedback')}
@@ -248,7 +272,7 @@ def _own(full: str) -> tuple[str, list[str]]:
             index = suffixes[kind].index(part)
             if len(sections) == len(suffixes[kind]):
                 text = _qualify(sections[index], package)
-                return text, _dependencies(text, package)
+                return text, _file_dependencies(text, package)
     return _generated(full)
 
 
@@ -268,34 +292,73 @@ def _qualify(text: str, package: str) -> str:
     return '\n'.join(lines) + ('\n' if text.endswith('\n') else '')
 
 
-def _dependencies(text: str, package: str) -> list[str]:
-    """Full names of the complex field types in a .msg text, in order of appearance."""
-    found: list[str] = []
-    for raw in text.splitlines():
-        line = raw.split('#', 1)[0].strip()
-        if not line:
-            continue
-        field_type, _, rest = line.partition(' ')
-        if '=' in rest.split(' ', 1)[0] or re.match(r'^\w+\s*=', rest.strip()):
-            continue  # a constant: primitive type only
-        base = re.sub(r'\[.*\]$', '', field_type)
-        base = re.sub(r'<=\d+$', '', base)
+#: Field types of a .msg text as rosbag2 finds them (rosbag2_cpp
+#: local_message_definition_source.cpp, ``MSG_FIELD_TYPE_REGEX``): the first word of a
+#: line, before any array brackets.  Bounded strings (``string<=5``) do not match.
+_FIELD_TYPE_RE = re.compile(r'(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+')
+
+#: Deepest nesting followed before giving up (rosbag2_cpp's
+#: ROSBAG2_CPP_LOCAL_MESSAGE_DEFINITION_SOURCE_MAX_RECURSION_DEPTH).
+MAX_DEPTH = 50
+
+
+def referenced_names(text: str, package: str) -> list[str]:
+    """The complex field types of a .msg text, named as rosbag2 heads them, sorted.
+
+    ``pkg/Type`` as the field spells it, ``<package>/Type`` for a relative name, and
+    ``std_msgs/Header`` for a bare ``Header`` (the .msg format's one special name);
+    sorted and each once, the order in which rosbag2 appends them.
+
+    Parameters
+    ----------
+    text : str
+        A .msg text (one type, no dependency sections).
+    package : str
+        The package the text belongs to (context of relative names).
+    """
+    names: set[str] = set()
+    for match in _FIELD_TYPE_RE.finditer(text):
+        base = match[1]
         if base in PRIMITIVES:
             continue
         if base == 'Header':
-            full = 'std_msgs/msg/Header'
+            names.add('std_msgs/Header')
         elif '/' in base:
-            full = normalise_type_name(base)
+            names.add(base)
         else:
-            full = f'{package}/msg/{base}'
-        if full not in found:
-            found.append(full)
-    return found
+            names.add(f'{package}/{base}')
+    return sorted(names)
+
+
+def _file_dependencies(text: str, package: str) -> dict[str, str]:
+    """Referenced name -> full name (``pkg/msg/T``) of each complex field of a file text."""
+    return {name: normalise_type_name(name) for name in referenced_names(text, package)}
+
+
+def _compose(root: str, own: Callable[[str], tuple[str, dict[str, str]]]) -> str:
+    """Concatenate a root text and its dependencies the way rosbag2 does.
+
+    ``own(key)`` returns the text of one type and, sorted by referenced name, the
+    referenced name -> key of each type it uses.
+    """
+    seen: set[str] = set()
+
+    def append(key: str, depth: int) -> str:
+        if depth <= 0:
+            raise DefinitionNotFoundError(f'{root}: dependencies nest deeper than {MAX_DEPTH}')
+        text, deps = own(key)
+        for name, dep_key in deps.items():
+            if name not in seen:
+                seen.add(name)
+                text += f'\n{SEPARATOR}\nMSG: {name}\n' + append(dep_key, depth - 1)
+        return text
+
+    return append(root, MAX_DEPTH)
 
 
 @cache
 def definition_text(type_name: str) -> str:
-    """Complete ``ros2msg`` definition of a type: its text and all dependencies.
+    """Complete ``ros2msg`` definition of a type, as rosbag2 writes it into an MCAP schema.
 
     Parameters
     ----------
@@ -306,8 +369,9 @@ def definition_text(type_name: str) -> str:
     Returns
     -------
     str
-        The top-level text, then each dependency (depth-first, each once) after an
-        80-character ``=`` line and a ``MSG: pkg/kind/Type`` line.
+        The top-level text, then each dependency once (depth first, the fields of each
+        text in sorted order), each after an 80-character ``=`` line and a line
+        ``MSG: <name as the field references it>`` (see the module docstring).
 
     Raises
     ------
@@ -316,21 +380,55 @@ def definition_text(type_name: str) -> str:
     ValueError
         If the name is malformed.
     """
-    top = normalise_type_name(type_name)
-    order: list[str] = []
+    return _compose(normalise_type_name(type_name), _own)
 
-    def visit(full: str) -> None:
-        for dep in _own(full)[1]:
-            if dep != top and dep not in order:
-                order.append(dep)
-                visit(dep)
 
-    visit(top)
-    parts = [_own(top)[0].rstrip('\n')]
-    for dep in order:
-        package, _, name = dep.split('/')
-        parts += [SEPARATOR, f'MSG: {package}/msg/{name}', _own(dep)[0].rstrip('\n')]
-    return '\n'.join(parts) + '\n'
+def rosbag2_form(type_name: str, definition: str) -> str:
+    """A stored definition whose headers read ``MSG: pkg/msg/Name``, rewritten as rosbag2's.
+
+    Bags written before the rosbag2 layout headed each dependency with its full name
+    and listed the dependencies in order of appearance.  The texts stored in the bag
+    are kept (they describe the recorded bytes, whatever is installed today); only
+    the headers and the order change.  A definition already in rosbag2's form, or one
+    with other section kinds (``IDL:``, ``SRV:``), is returned unchanged.
+
+    Parameters
+    ----------
+    type_name : str
+        The schema's type name (``pkg/msg/T``, ``pkg/srv/T_Event``, ...).
+    definition : str
+        The schema text as stored.
+
+    Raises
+    ------
+    DefinitionNotFoundError
+        If a field's type has no section in the stored text.
+    ValueError
+        If a name is malformed.
+    """
+    lines = definition.split('\n')
+    starts = [
+        k for k in range(len(lines) - 1)
+        if lines[k] == SEPARATOR and lines[k + 1].startswith(('MSG: ', 'IDL: ', 'SRV: '))
+    ]
+    headers = [lines[k + 1] for k in starts]
+    if not any(h.startswith('MSG: ') and h.count('/') == 2 for h in headers) or any(
+        not h.startswith('MSG: ') for h in headers
+    ):
+        return definition
+    ends = [*starts, len(lines)]
+    root_key = normalise_type_name(type_name)
+    texts = {root_key: '\n'.join(lines[: ends[0]]).rstrip('\n') + '\n'}
+    for start, end in zip(starts, ends[1:]):
+        name = normalise_type_name(lines[start + 1][len('MSG: '):].strip())
+        texts.setdefault(name, '\n'.join(lines[start + 2 : end]).rstrip('\n') + '\n')
+
+    def own(key: str) -> tuple[str, dict[str, str]]:
+        if key not in texts:
+            raise DefinitionNotFoundError(f'{type_name}: the stored definition has no {key}')
+        return texts[key], _file_dependencies(texts[key], key.split('/')[0])
+
+    return _compose(root_key, own)
 
 
 @cache

@@ -5,7 +5,8 @@ section, so it also reads a file cut short (a recorder killed mid-run, a disk th
 filled up): it keeps every complete chunk and stops at the first incomplete or
 corrupt record (CRCs of chunks are checked), reporting how many messages it
 recovered and why it stopped.  :func:`reindex` rewrites such a file into a complete
-bag (summary, statistics, ``metadata.yaml``), like ``ros2 bag reindex``.
+bag (summary, statistics, ``metadata.yaml``), like ``ros2 bag reindex``, with the
+schemas of older bags in rosbag2's layout (:func:`~.definitions.rosbag2_form`).
 :func:`decode` turns the raw CDR of a message into an object with the message's
 fields (mcap-ros2-support's decoder, driven by the schema stored in the bag).
 """
@@ -336,6 +337,11 @@ def read_metadata_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
 def reindex(path: str | os.PathLike[str], output: str | os.PathLike[str] | None = None) -> Path:
     """Rewrite a (possibly truncated) bag into a complete one, like ``ros2 bag reindex``.
 
+    Schemas written before the rosbag2 layout (dependencies headed ``MSG: pkg/msg/T``)
+    come out in rosbag2's layout, from the texts stored in the bag
+    (:func:`~suspension_tuning.bag.definitions.rosbag2_form`), so Foxglove can decode
+    them; a schema that cannot be rewritten is kept as it is.
+
     Parameters
     ----------
     path : str or Path
@@ -349,6 +355,7 @@ def reindex(path: str | os.PathLike[str], output: str | os.PathLike[str] | None 
     Path
         The folder of the complete bag.
     """
+    from suspension_tuning.bag.definitions import DefinitionNotFoundError, rosbag2_form
     from suspension_tuning.bag.writer import BagWriter
 
     contents = read_messages(path)
@@ -358,11 +365,17 @@ def reindex(path: str | os.PathLike[str], output: str | os.PathLike[str] | None 
     writer = BagWriter(target)
     by_topic = {}
     for channel in sorted(contents.channels.values(), key=lambda c: c.id):
+        definition = channel.definition
+        if channel.schema_encoding == 'ros2msg':
+            try:
+                definition = rosbag2_form(channel.type, definition)
+            except (DefinitionNotFoundError, ValueError):
+                pass  # the stored text stays: it still decodes with mcap-ros2-support
         by_topic[channel.topic] = writer.add_topic(
             channel.topic,
             channel.type,
             channel.offered_qos_profiles,
-            definition=channel.definition,
+            definition=definition,
             type_description_hash=channel.metadata.get('topic_type_hash', ''),
         )
     for name, data in contents.metadata.items():

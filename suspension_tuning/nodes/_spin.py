@@ -2,30 +2,39 @@
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
+from typing import Any
 
 import rclpy
-from rclpy.exceptions import InvalidHandle
 from rclpy.executors import (
     Executor,
     ExternalShutdownException,
-    MultiThreadedExecutor,
     SingleThreadedExecutor,
 )
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 
 
-def spin_until_shutdown(executor: Executor,
-                        until: Callable[[], bool] | None = None) -> None:
+def executor_for(node: Node) -> Executor:
+    """A new executor of the kind ``node`` asks for (its class attribute ``EXECUTOR``).
+
+    Nodes whose callbacks wait for other callbacks (a service call's response, a
+    valve state) name ``MultiThreadedExecutor``; the others, and any node without
+    the attribute, get a SingleThreadedExecutor, the cheaper per callback.
+    """
+    return getattr(node, 'EXECUTOR', SingleThreadedExecutor)(context=node.context)
+
+
+def spin_until_shutdown(executor: Executor, until: Callable[[], bool] | None = None,
+                        stopped: Callable[[], bool] | None = None) -> None:
     """Spin until Ctrl-C or the context shuts down (or ``until()`` turns true).
 
     Ctrl-C normally raises KeyboardInterrupt here, or ExternalShutdownException once
     rclpy's signal handler has shut the context down.  When the interrupt lands in a
     ``__del__`` (e.g. of an rclpy Future) Python prints and drops it, the context is
-    shut down all the same, and the next spin fails to build its wait set with an
-    RCLError: that is a shutdown too, not a crash.  So is an InvalidHandle once the
-    executor has been shut down from another thread (``SpinningGraph.shutdown``):
+    shut down all the same, and the next spin fails to build its wait set with a
+    RuntimeError: that is a shutdown too, not a crash.  So is a RuntimeError once
+    the executor has been shut down from another thread (``stopped()`` says so):
     rclpy's ``Executor.shutdown`` destroys the executor's guard condition without
     waiting for the spin's tasks, and a task that is still running triggers it
     (ros2/rclpy#968, open; Jazzy).
@@ -37,6 +46,8 @@ def spin_until_shutdown(executor: Executor,
     until : callable, optional
         Checked every 0.1 s; spinning stops when it returns True (e.g. a node's work
         is done).  Without it the executor spins until shutdown.
+    stopped : callable, optional
+        True once whoever owns the executor has shut it down (``SpinningGraph``).
     """
     try:
         if until is None:
@@ -46,35 +57,40 @@ def spin_until_shutdown(executor: Executor,
                 executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except _rclpy.RCLError:
-        if executor.context.ok():
-            raise
-    except InvalidHandle:
-        if not getattr(executor, '_is_shutdown', False):  # rclpy's flag, set first
+    except RuntimeError:  # rclpy's RCLError and InvalidHandle
+        if executor.context.ok() and not (stopped is not None and stopped()):
             raise
 
 
-def run_node(make_node: Callable[[], Node], args: list[str] | None = None,
-             multithreaded: bool = True) -> None:
+def wait_future(future: Any, timeout_s: float | None = None) -> Any:
+    """Wait for an rclpy future completed by an executor in another thread.
+
+    Raises
+    ------
+    TimeoutError
+        No result within ``timeout_s`` seconds (None waits for ever).
+    """
+    done = threading.Event()
+    future.add_done_callback(lambda _: done.set())
+    if not done.wait(timeout_s):
+        raise TimeoutError(f'no answer within {timeout_s} s')
+    return future.result()
+
+
+def run_node(make_node: Callable[[], Node], args: list[str] | None = None) -> None:
     """Initialise rclpy, spin one node until Ctrl-C or shutdown, then clean up.
 
     Parameters
     ----------
     make_node : callable
-        Creates the node (after ``rclpy.init``, so ``--ros-args`` apply to it).
+        Creates the node (after ``rclpy.init``, so ``--ros-args`` apply to it).  It
+        is spun by :func:`executor_for` the node.
     args : list of str, optional
         Command-line arguments (``--ros-args ...``); default ``sys.argv``.
-    multithreaded : bool
-        A MultiThreadedExecutor, for nodes with callbacks that run long while other
-        requests must still be answered; otherwise a SingleThreadedExecutor, the
-        cheaper per callback.  (Service calls made from a callback take their own
-        responses, ``_service_calls.ServiceCaller``, the hot services have threads of
-        their own, ``_service_thread.py``, and the coordinator's goals run on goal
-        threads: none of them needs this executor.)
     """
     rclpy.init(args=args)
     node = make_node()
-    executor: Executor = MultiThreadedExecutor() if multithreaded else SingleThreadedExecutor()
+    executor = executor_for(node)
     executor.add_node(node)
     try:
         spin_until_shutdown(executor)

@@ -17,31 +17,25 @@ that the recorder puts one run in one bag.  The loop itself is
 
 from __future__ import annotations
 
-import json
+import collections
 import subprocess
+import threading
 import time
-from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
+import yaml
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.task import Task
 from std_msgs.msg import String
 from suspension_tuning_interfaces.action import Optimise
-from suspension_tuning_interfaces.msg import IterationRecord, TimeHistories
+from suspension_tuning_interfaces.msg import CalibrationProgress, IterationRecord, TimeHistories
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
-from suspension_tuning.nodes import _logging
-from suspension_tuning.nodes._service_calls import (
-    ServiceCaller,
-    ServiceCallError,
-    SimulationPool,
-)
-from suspension_tuning.nodes._service_thread import LoopActionServer, ServiceLoop
+from suspension_tuning.nodes._services import ServiceCallError, SimulationPool, call
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.dynamic_q import load_options
 from suspension_tuning.paths import config_dir, dump_yaml, read_yaml
@@ -93,68 +87,20 @@ def record_to_msg(record: dict[str, Any], counter: RunCounter, t0: float) -> Ite
         wall_time_s=time.monotonic() - t0)
 
 
-class GoalThreadActionServer(ActionServer):
-    """rclpy's ActionServer, with each goal executed on a thread chosen by the node.
-
-    rclpy (Jazzy) runs a goal's execute callback as a task of the node's executor, so
-    an optimisation that runs for minutes needs a MultiThreadedExecutor to keep
-    cancel, goal and parameter requests answered, and every callback of the node
-    then pays a hand-over to a thread of its pool.  Here the executor (single
-    threaded) takes the goal, and rclpy's own execution coroutine (which runs the
-    callback, sets the goal's result and answers the result requests) runs in
-    ``run_goal``; the execute callback is synchronous, so the coroutine ends in one
-    step.  In the graph of ``graph.build_nodes`` the model loop takes the goal instead
-    of the executor (``_service_thread.LoopActionServer``) and runs it too: the goal
-    started 1.4 ms after it was sent, against 1.7 ms with the executor taking it
-    and 2.4 ms through a MultiThreadedExecutor
-    (``benchmarks/bench_graph_timeline.py``, ``goal_to_execute_ms``).
-
-    Parameters
-    ----------
-    *args, **kwargs
-        As for ``rclpy.action.ActionServer``.
-    run_goal : callable
-        ``run_goal(task)`` calls ``task()`` on the thread that is to run the goal.
-    """
-
-    def __init__(self, *args: Any, run_goal: Callable[[Task], Any], **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self._run_goal = run_goal
-
-    def notify_execute(self, goal_handle: Any, execute_callback: Callable | None) -> None:
-        """Hand the goal's execution to ``run_goal`` (rclpy: an executor task)."""
-        callback = execute_callback or self._execute_callback
-        if callback is not None:
-            self._run_goal(Task(self._execute_goal, (callback, goal_handle)))
-
-    def add_future(self, future: Any) -> None:
-        """Keep a goal's result future away from the executor.
-
-        rclpy registers it so that the executor runs its done callback (sending the
-        result to the clients that asked for it) as a task, after a wake-up of its
-        own.  Unregistered, the callback runs on the goal's thread as the goal ends,
-        or on the executor's thread when a result request comes after the end.
-        """
-
-    def remove_future(self, future: Any) -> None:
-        """Nothing to remove (see :meth:`add_future`)."""
-
-
 class CoordinatorNode(Node):
     """Action server ``optimise`` over the simulation workers and gradient evaluator.
 
-    Parameters
-    ----------
-    goal_loop : ServiceLoop, optional
-        Run goals on this loop's thread, and answer its requests while a goal waits
-        for a response (``graph.build_nodes``: the loop serving the models, so that
-        the coordinator's calls to them need no hand-over between threads).  By
-        default goals run on goal threads of the node's own (up to four at once).
-    **kwargs
-        As for ``rclpy.node.Node``.
+    Goals run one after another, in the order accepted (the queue of ros2/examples'
+    ``server_queue_goals.py``): they share the workers, and a goal cancelled while
+    it waits ends at its start, without a model run.  A goal's execute callback runs
+    on a thread of the node's MultiThreadedExecutor and waits there for the service
+    responses, which the clients' callback group takes on another thread; goal,
+    cancel and result requests are answered meanwhile.
     """
 
-    def __init__(self, goal_loop: ServiceLoop | None = None, **kwargs) -> None:
+    EXECUTOR = MultiThreadedExecutor
+
+    def __init__(self, **kwargs) -> None:
         super().__init__('coordinator', **kwargs)
         self.declare_parameter('sim_workers', ['/full_vehicle_sim'])
         self.declare_parameter('gradient_node', '/gradient_evaluator')
@@ -170,19 +116,29 @@ class CoordinatorNode(Node):
         # (rcl's default 900 s).  Every status message carries every goal kept, and an
         # action client converts all of them each time (config/graph.yaml).
         self.declare_parameter('result_timeout_s', 10.0)
-        group = ReentrantCallbackGroup()
         self.timeout_s = float(self.get_parameter('call_timeout_s').value)
-        self.goal_loop = goal_loop
-        self.goal_threads = ThreadPoolExecutor(max_workers=4, thread_name_prefix='optimise')
-        self.goals: list[Future] = []
-        self.caller = ServiceCaller(self, serve_loop=goal_loop)
-        self.pool = SimulationPool(self.caller, list(self.get_parameter('sim_workers').value),
-                                   self.timeout_s)
+        self.stopping = False  # set by destroy_node: a running goal stops waiting
+        clients = ReentrantCallbackGroup()
+        self.pool = SimulationPool(self, list(self.get_parameter('sim_workers').value),
+                                   self.timeout_s, clients, self._stopped)
+        # The full model each worker runs (its latched ~/model: built-in, or the FMU's
+        # file, identity and mapping), recorded in every run configuration.
+        self.worker_models: dict[str, Any] = {}
+        for worker in self.get_parameter('sim_workers').value:
+            name = str(worker).rstrip('/')
+            self.create_subscription(
+                String, f'{name}/model',
+                lambda msg, name=name: self.worker_models.__setitem__(
+                    name, yaml.safe_load(msg.data)), LATCHED, callback_group=clients)
         gradient_node = str(self.get_parameter('gradient_node').value).rstrip('/')
-        self.gradient_client = self.caller.create_client(EvaluateGradient,
-                                                         f'{gradient_node}/gradient')
-        self.calibrate_client = self.caller.create_client(Calibrate,
-                                                          f'{gradient_node}/calibrate')
+        self.gradient_client = self.create_client(EvaluateGradient, f'{gradient_node}/gradient',
+                                                  callback_group=clients)
+        self.calibrate_client = self.create_client(Calibrate, f'{gradient_node}/calibrate',
+                                                   callback_group=clients)
+        # A calibration's progress, passed on as the calibrating goal's feedback.
+        self._calibrating: tuple[Any, TuningRequest] | None = None
+        self.create_subscription(CalibrationProgress, f'{gradient_node}/calibration_progress',
+                                 self._on_calibration_progress, 100, callback_group=clients)
         config = str(self.get_parameter('optimiser_config').value) or str(
             CONFIG_DIR / 'optimiser.yaml')
         self.options = load_options(config, str(self.get_parameter('optimiser_section').value))
@@ -191,31 +147,35 @@ class CoordinatorNode(Node):
         self.config_pub = self.create_publisher(String, '/optimisation/run_config', LATCHED)
         self.result_pub = self.create_publisher(Optimise.Result, '/optimisation/result',
                                                 LATCHED)
-        # Dumped once: the configuration a run records does not change while the node runs.
+        # Dumped once (29 ms): the configuration files do not change while the node runs.
         self.static_config_yaml = configuration_yaml()
-        # (JSON form, YAML text) of the last run configuration published.
-        self._config_yaml: tuple[str, str] = ('', '')
-        self.server = GoalThreadActionServer(
+        self._queue: collections.deque = collections.deque()
+        self._running: Any = None  # the goal handle executing, if any
+        self._idle = threading.Condition()
+        self.server = ActionServer(
             self, Optimise, '~/optimise', execute_callback=self._execute,
             goal_callback=lambda _: GoalResponse.ACCEPT,
-            cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=group,
-            result_timeout=float(self.get_parameter('result_timeout_s').value),
-            run_goal=self._run_goal)
-        # On the goal loop, the loop takes the goal, cancel and result requests too.
-        self.served_action = (None if goal_loop is None else LoopActionServer(
-            self, self.server, f'{self.get_fully_qualified_name()}/optimise', goal_loop))
+            handle_accepted_callback=self._on_accepted,
+            cancel_callback=lambda _: CancelResponse.ACCEPT,
+            callback_group=ReentrantCallbackGroup(),
+            result_timeout=float(self.get_parameter('result_timeout_s').value))
 
-    def _run_goal(self, task: Task) -> None:
-        """Start a goal on the goal loop, or on a goal thread (loop stopped or none)."""
-        future = None
-        if self.goal_loop is not None:
-            try:
-                future = self.goal_loop.submit(self._execute_task, task)
-            except RuntimeError:  # the loop has stopped: a goal thread instead
-                pass
-        if future is None:
-            future = self.goal_threads.submit(self._execute_task, task)
-        self.goals = [goal for goal in self.goals if not goal.done()] + [future]
+    def _on_accepted(self, goal_handle) -> None:
+        """Execute the goal now, or after the goals accepted before it."""
+        with self._idle:
+            if self._running is None:
+                self._running = goal_handle
+                goal_handle.execute()
+            else:
+                self._queue.append(goal_handle)
+
+    def _next_goal(self) -> None:
+        """Start the next queued goal (at the end of a goal's execute callback)."""
+        with self._idle:
+            self._running = self._queue.popleft() if self._queue and not self.stopping else None
+            if self._running is not None:
+                self._running.execute()
+            self._idle.notify_all()
 
     # ------------------------------------------------------------------ helpers
     def _request(self, goal: Optimise.Goal) -> TuningRequest:
@@ -236,17 +196,18 @@ class CoordinatorNode(Node):
             'integrator': request.integrator or 'simulation default',
             'coordinator_parameters': {name: p.value for name, p in
                                        self.get_parameters_by_prefix('').items()},
+            'simulation_models': self._worker_models(),
         }
-        # Goals of one node mostly repeat their configuration, and the YAML emitter
-        # (libyaml's, through PyYAML's representers) takes ~0.25 ms even warm: the text
-        # of a configuration is kept, keyed by its JSON form.  The start time is the
-        # one line that always changes (a float's YAML form is its repr, as PyYAML's).
-        key = json.dumps(config, default=repr)
-        if self._config_yaml[0] != key:
-            self._config_yaml = (key, dump_yaml(config))
-        text = self._config_yaml[1]
         stamp = f'started_unix_s: {time.time()!r}\n'
-        self.config_pub.publish(String(data=text + stamp + self.static_config_yaml))
+        self.config_pub.publish(String(data=dump_yaml(config) + stamp + self.static_config_yaml))
+
+    def _worker_models(self, wait_s: float = 2.0) -> dict[str, Any]:
+        """Each worker's model description; a worker not heard from within wait_s says so."""
+        names = [str(w).rstrip('/') for w in self.get_parameter('sim_workers').value]
+        deadline = time.monotonic() + wait_s
+        while any(n not in self.worker_models for n in names) and time.monotonic() < deadline:
+            time.sleep(0.02)  # the subscriptions are served by the node's executor
+        return {n: self.worker_models.get(n, 'no model description received') for n in names}
 
     def _full_model(self, request: TuningRequest):
         def evaluate(designs: np.ndarray) -> FullEvaluation:
@@ -266,34 +227,39 @@ class CoordinatorNode(Node):
 
     def _simplified_gradient(self, request: TuningRequest):
         def gradient(x: np.ndarray, inputs: Any) -> tuple[np.ndarray, np.ndarray]:
-            response = self.caller.call(self.gradient_client, EvaluateGradient.Request(
+            response = call(self, self.gradient_client, EvaluateGradient.Request(
                 scenario=request.scenario, n_vars=request.n_vars, x=x.tolist(),
                 step=request.fd_step,
-                inputs=TimeHistories() if inputs is None else inputs), self.timeout_s)
+                inputs=TimeHistories() if inputs is None else inputs), self.timeout_s,
+                self._stopped)
             if not response.success:
                 raise ValueError(f'gradient evaluator: {response.error}')
             dg = np.asarray(response.dg, float).reshape(response.n_constraints, request.n_vars)
             return np.asarray(response.df, float), dg
         return gradient
 
-    def _calibrate(self, request: TuningRequest) -> Calibrate.Response:
-        response = self.caller.call(self.calibrate_client, Calibrate.Request(
-            scenario=request.scenario, n_vars=request.n_vars,
-            n_samples=int(self.get_parameter('calibration_samples').value), force=False,
-            integrator=request.integrator),
-            self.timeout_s * 2)
+    def _calibrate(self, goal_handle, request: TuningRequest) -> Calibrate.Response:
+        self._calibrating = (goal_handle, request)
+        try:
+            response = call(self, self.calibrate_client, Calibrate.Request(
+                scenario=request.scenario, n_vars=request.n_vars,
+                n_samples=int(self.get_parameter('calibration_samples').value), force=False,
+                integrator=request.integrator),
+                self.timeout_s * 2, self._stopped)
+        finally:
+            self._calibrating = None
         if not response.success:
             raise ValueError(f'calibration failed: {response.error}')
         return response
 
-    # ------------------------------------------------------------------ action
-    def _execute_task(self, task: Task) -> None:
-        """Run rclpy's execution coroutine of one goal (on the goal's thread)."""
-        task()
-        error = task.exception() if task.done() else RuntimeError('goal suspended')
-        if error is not None and self.context.ok():  # after shutdown: nothing to report to
-            self.get_logger().error(f'goal execution failed: {type(error).__name__}: {error}')
+    def _on_calibration_progress(self, msg: CalibrationProgress) -> None:
+        calibrating = self._calibrating
+        if calibrating is not None and (msg.scenario, msg.n_vars) == (
+                calibrating[1].scenario, calibrating[1].n_vars):
+            calibrating[0].publish_feedback(Optimise.Feedback(phase='calibration',
+                                                              calibration=msg))
 
+    # ------------------------------------------------------------------ action
     def _execute(self, goal_handle) -> Optimise.Result:
         """The action's execute callback: :meth:`_optimise`, quiet when ROS shuts down.
 
@@ -305,10 +271,12 @@ class CoordinatorNode(Node):
         try:
             return self._optimise(goal_handle)
         except Exception as error:
-            if self.context.ok():
-                raise
+            if self.context.ok() and not self.stopping:
+                raise  # rclpy logs it and aborts the goal
             return Optimise.Result(success=False, message='stopped: ROS shut down under the '
                                    f'goal ({type(error).__name__}: {error})')
+        finally:
+            self._next_goal()
 
     def _optimise(self, goal_handle) -> Optimise.Result:
         t0 = time.monotonic()
@@ -320,8 +288,8 @@ class CoordinatorNode(Node):
         if goal_handle.is_cancel_requested:  # cancelled while it waited for an earlier goal
             goal_handle.canceled()
             return Optimise.Result(success=False, message='cancelled before it started')
-        _logging.info(self, f'optimising {request.scenario} with {request.n_vars} '
-                            f'variables, {request.gradient_source} gradients')
+        self.get_logger().info(f'optimising {request.scenario} with {request.n_vars} '
+                               f'variables, {request.gradient_source} gradients')
         self._publish_run_config(request)
         counter = RunCounter()
         history_msgs: list[IterationRecord] = []
@@ -329,13 +297,13 @@ class CoordinatorNode(Node):
         def on_iteration(record: dict[str, Any], counts: RunCounter) -> bool:
             msg = record_to_msg(record, counts, t0)
             history_msgs.append(msg)
-            goal_handle.publish_feedback(Optimise.Feedback(latest=msg))
+            goal_handle.publish_feedback(Optimise.Feedback(phase='iteration', latest=msg))
             self.progress_pub.publish(msg)
             return goal_handle.is_cancel_requested
 
         try:
             if request.gradient_source == 'simplified':
-                counter.calibration_runs = int(self._calibrate(request).n_full_runs)
+                counter.calibration_runs = int(self._calibrate(goal_handle, request).n_full_runs)
             result = optimise(request, self._full_model(request),
                               self._simplified_gradient(request), on_iteration,
                               counter=counter)
@@ -350,7 +318,7 @@ class CoordinatorNode(Node):
         if self.get_parameter('final_telemetry').value and not goal_handle.is_cancel_requested:
             try:
                 self.pool.evaluate(request.scenario, request.n_vars, result.x[None, :],
-                                   publish_telemetry=True)
+                                   publish_telemetry=True, integrator=request.integrator)
             except (ValueError, ServiceCallError) as error:
                 self.get_logger().warning(f'telemetry run of the optimum failed: {error}')
         message = Optimise.Result(
@@ -367,30 +335,27 @@ class CoordinatorNode(Node):
         self.result_pub.publish(message)
         return message
 
-    def destroy_node(self) -> None:
-        """Destroy the action server and the private clients too, after goals end (10 s).
+    def _stopped(self) -> bool:
+        return self.stopping
 
-        rclpy's ``Node.destroy_node`` leaves action servers alone: the server's handles
-        keep the node's DDS participant alive, and other processes go on seeing an
-        ``optimise`` action that never answers.
+    def destroy_node(self) -> None:
+        """Let a running goal end, drop the queued ones, destroy the action server too.
+
+        A running goal's service waits end within a second (10 s at most).  rclpy's
+        ``Node.destroy_node`` leaves action servers alone: the server's handles keep the
+        node's DDS participant alive, and other processes go on seeing an ``optimise``
+        action that never answers.
         """
-        for goal in self.goals:
-            if not goal.done():
-                try:
-                    goal.result(timeout=10.0)
-                except Exception:  # noqa: BLE001 - ended or stuck: destroyed all the same
-                    pass
-        self.goal_threads.shutdown(wait=False, cancel_futures=True)
-        if self.served_action is not None:
-            self.served_action.destroy()
+        with self._idle:
+            self.stopping = True
+            self._idle.wait_for(lambda: self._running is None, 10.0)
         self.server.destroy()
-        self.caller.destroy()
         super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning coordinator``."""
-    run_node(CoordinatorNode, args, multithreaded=False)
+    run_node(CoordinatorNode, args)
 
 
 if __name__ == '__main__':

@@ -7,11 +7,14 @@ simplified models' inputs of each design and the wall time out.  A bad request
 reason in ``error``; the node keeps serving.
 
 On request it publishes the time histories of the first design as telemetry on
-standard types, stamped with simulated time: ``~/telemetry/imu`` (sensor_msgs/Imu,
-body), ``~/telemetry/struts`` (JointState: stroke m, stroke rate m/s, force N per
-strut), ``~/telemetry/tyres`` (JointState: slip angle rad, normal force N),
-``~/telemetry/seats`` (JointState: driver and passenger vertical acceleration m/s^2 as
-effort) and ``~/telemetry/steering`` (JointState: front road-wheel angle).
+standard types, stamped with simulated time (:mod:`suspension_tuning.telemetry` has
+the table): ``~/telemetry/imu`` (sensor_msgs/Imu: the body's attitude, rates and
+longitudinal, lateral and vertical acceleration), ``~/telemetry/seat/{driver,passenger}``
+and ``~/telemetry/seat/{driver,passenger}_wb`` (geometry_msgs/AccelStamped: each
+seat's vertical acceleration, unweighted and BS 6841 W_b weighted),
+``~/telemetry/struts`` (JointState: stroke m, force N per strut),
+``~/telemetry/tyres`` (JointState: slip angle rad, normal force N) and
+``~/telemetry/steering`` (JointState: front road-wheel angle and rate).
 
 Scenario ``mixed`` runs closed-loop against the valve controller on simulated time:
 for each control period the node publishes ``/clock`` and ``/vehicle/state`` (step k)
@@ -21,29 +24,40 @@ or 'inprocess' for the same controller without topics).
 
 Several workers run as ``--ros-args -r __node:=sim_0`` etc.; each serves its own
 ``/<name>/evaluate``.
+
+Parameter ``model``: 'builtin' (default) or 'fmu', a user's full vehicle model as an
+FMI co-simulation FMU (``fmu_path``, ``fmu_mapping``: docs/fmu.md), checked at
+start-up: a worker whose FMU or mapping does not fit does not start.  ``~/model``
+(std_msgs/String, latched) says which model the worker runs (for an FMU: its file,
+GUID or instantiation token and the mapping); the coordinator records it in the run
+configuration.  An FMU worker publishes no telemetry.
 """
 
 from __future__ import annotations
 
-import math
+import sys
+import threading
 import time
 
 import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import Imu, JointState
+from std_msgs.msg import String
 from suspension_tuning_interfaces.msg import TimeHistories, ValveState, VehicleState
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
-from suspension_tuning import evaluation, simplified_inputs
-from suspension_tuning.nodes._service_calls import helper_node
-from suspension_tuning.nodes._service_thread import ServiceLoop, ServiceThread
+from suspension_tuning import evaluation, simplified_inputs, telemetry
+from suspension_tuning.fmu import FmuConfigError, MappingError, worker_model
+from suspension_tuning.nodes._services import serve
 from suspension_tuning.nodes._spin import run_node
+from suspension_tuning.paths import dump_yaml
+from suspension_tuning.telemetry import stamp, telemetry_messages
 from suspension_tuning.vehicle.params import load_vehicle_params
 from suspension_tuning.vehicle.simplified import SimplifiedInputs
 
-CORNERS = ['FL', 'FR', 'RL', 'RR']
 #: Vehicle states and valve states must not be dropped in a step-locked run.
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 #: Telemetry of a run is published as one burst after the simulation (thousands of
@@ -51,6 +65,9 @@ RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 #: whole run keeps every sample for the recorder; best-effort subscribers (plot tools)
 #: are compatible with it.
 TELEMETRY = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
+#: The worker's model description: a late subscriber (the coordinator) still gets it.
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class TopicValveController:
@@ -67,7 +84,7 @@ class TopicValveController:
     def __call__(self, step: int, state: dict) -> tuple[int, int, int, int]:
         """Publish step ``step``'s state and return the valve state answering it."""
         node = self.node
-        sim_time = stamp(node, state['t_s'])
+        sim_time = stamp(state['t_s'])
         node.clock_pub.publish(Clock(clock=sim_time))
         msg = VehicleState(step=step, speed_mps=state['speed_mps'],
                            lateral_acceleration_mps2=state['lateral_acceleration_mps2'],
@@ -77,81 +94,79 @@ class TopicValveController:
                            steering_rate_radps=state['steering_rate_radps'],
                            strut_pressure_pa=list(state['strut_pressure_pa']))
         msg.header.stamp, msg.header.frame_id = sim_time, 'base_link'
-        node.valve_answers.clear()
-        # The closed loop runs on a node and executor of its own, spun here by the
-        # service callback's thread (as rclpy's wait_for_message does): the answer must
-        # not wait for the node's shared executor, which may be busy or asleep.  A state
-        # without an answer within a second is published again (the controller's update
-        # is idempotent for a repeated step).
+        # The answer comes on another thread of the node's executor (the valve state
+        # subscription's callback group).  A state without an answer within a second
+        # is published again (the controller's update is idempotent for a repeated step).
         deadline = time.monotonic() + self.timeout_s
-        while True:
-            node.state_pub.publish(msg)
-            resend = min(time.monotonic() + 1.0, deadline)
-            while step not in node.valve_answers and time.monotonic() < resend:
-                node.loop_executor.spin_once(timeout_sec=0.05)
-            if step in node.valve_answers:
-                return node.valve_answers[step]
-            if time.monotonic() >= deadline:
-                raise RuntimeError(f'no valve state for step {step} within {self.timeout_s} '
-                                   's: is the valve_controller node running?')
-            node.get_logger().warning(f'no valve state for step {step} yet: publishing '
-                                      'the vehicle state again')
-
-
-def stamp(node: Node, t_s: float):
-    """A builtin_interfaces/Time of simulated time t_s."""
-    msg = node.get_clock().now().to_msg()
-    msg.sec = int(math.floor(t_s))
-    msg.nanosec = int(round((t_s - math.floor(t_s)) * 1e9)) % 1_000_000_000
-    return msg
-
-
-def quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    """(x, y, z, w) of body Euler angles roll-pitch-yaw (rad, ZYX convention)."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
-            cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
+        with node.valve_news:
+            node.valve_answers.clear()
+            while True:
+                node.state_pub.publish(msg)
+                wait = min(1.0, deadline - time.monotonic())
+                if node.valve_news.wait_for(lambda: step in node.valve_answers, wait):
+                    return node.valve_answers[step]
+                if time.monotonic() >= deadline:
+                    raise RuntimeError(f'no valve state for step {step} within '
+                                       f'{self.timeout_s} s: is the valve_controller node '
+                                       'running?')
+                node.get_logger().warning(f'no valve state for step {step} yet: '
+                                          'publishing the vehicle state again')
 
 
 class FullVehicleSimNode(Node):
-    """Service adapter over :func:`suspension_tuning.evaluation.evaluate`."""
+    """Service adapter over :func:`suspension_tuning.evaluation.evaluate`.
 
-    def __init__(self, name: str = 'full_vehicle_sim', service_loop: ServiceLoop | None = None,
-                 **kwargs) -> None:
-        """``service_loop``: serve ``evaluate`` on this shared loop (default its own)."""
+    Multi-threaded: a closed-loop run's evaluate callback waits for valve states,
+    which the subscription's callback group takes meanwhile.
+    """
+
+    EXECUTOR = MultiThreadedExecutor
+
+    def __init__(self, name: str = 'full_vehicle_sim', **kwargs) -> None:
         super().__init__(name, **kwargs)
         self.declare_parameter('telemetry_decimation', 2)
         self.declare_parameter('valve_controller', 'ros')
         self.declare_parameter('closed_loop_timeout_s', 5.0)
+        self.declare_parameter('model', 'builtin')
+        self.declare_parameter('fmu_path', '')
+        self.declare_parameter('fmu_mapping', '')
         # full-model integrator when a request names none (config/vehicle.yaml default)
         self.declare_parameter('integrator', load_vehicle_params().integrator.method)
-        self.loop_node, self.loop_executor = helper_node(self, f'{self.get_name()}_closed_loop')
-        self.clock_pub = self.loop_node.create_publisher(Clock, '/clock', 10)
-        self.state_pub = self.loop_node.create_publisher(VehicleState, '/vehicle/state',
-                                                         RELIABLE)
+        try:  # before anything else: a bad FMU set-up leaves nothing half-started
+            self.fmu = worker_model(*(str(self.get_parameter(name).value)
+                                      for name in ('model', 'fmu_path', 'fmu_mapping')))
+        except (FmuConfigError, MappingError):
+            Node.destroy_node(self)
+            raise
+        self.model_pub = self.create_publisher(String, '~/model', LATCHED)
+        self.model_pub.publish(String(data=dump_yaml(
+            {'model': 'builtin'} if self.fmu is None else self.fmu.description())))
+        self.clock_pub = self.create_publisher(Clock, '/clock', 10)
+        self.state_pub = self.create_publisher(VehicleState, '/vehicle/state', RELIABLE)
         self.valve_answers: dict[int, tuple[int, int, int, int]] = {}
-        self.loop_node.create_subscription(ValveState, '/suspension/valve_state',
-                                           self._on_valve_state, RELIABLE)
-        # Served on a thread of its own (no executor in the path of a request).
-        self.evaluate_service = ServiceThread(self, EvaluateDesign, 'evaluate',
-                                              self._on_evaluate, loop=service_loop)
+        self.valve_news = threading.Condition()
+        self.create_subscription(ValveState, '/suspension/valve_state', self._on_valve_state,
+                                 RELIABLE, callback_group=MutuallyExclusiveCallbackGroup())
+        self.evaluate_service = serve(self, EvaluateDesign, '~/evaluate', self._on_evaluate,
+                                      MutuallyExclusiveCallbackGroup())
         self.pub = {name: self.create_publisher(kind, f'~/telemetry/{name}', TELEMETRY)
-                    for name, kind in (('imu', Imu), ('struts', JointState),
-                                       ('tyres', JointState), ('seats', JointState),
-                                       ('steering', JointState))}
+                    for name, kind in telemetry.TOPICS.items()}
         self.runs = 0
+        self.evaluate_calls = 0
 
     def _on_evaluate(self, request: EvaluateDesign.Request,
                      response: EvaluateDesign.Response) -> EvaluateDesign.Response:
         start = time.monotonic()
+        self.evaluate_calls += 1
         try:
             designs = evaluation.parse_designs(request.scenario, int(request.n_vars),
                                                request.designs)
-            result = evaluation.evaluate(
-                request.scenario, designs, controllers=self._controllers(request, designs),
-                integrator=request.integrator or self.get_parameter('integrator').value)
+            if self.fmu is None:
+                result = evaluation.evaluate(
+                    request.scenario, designs, controllers=self._controllers(request, designs),
+                    integrator=request.integrator or self.get_parameter('integrator').value)
+            else:
+                result = self.fmu.evaluate(request.scenario, designs)
         except ValueError as error:
             response.success = False
             response.error = str(error)
@@ -174,7 +189,7 @@ class FullVehicleSimNode(Node):
             response.inputs = [simplified_inputs.pack(
                 SimplifiedInputs.from_scenario_result(result.result, i), TimeHistories())
                 for i in range(len(designs))]
-        if request.publish_telemetry:
+        if request.publish_telemetry and self.fmu is None:
             self.publish_telemetry(result.result.histories)
         response.wall_time_s = time.monotonic() - start
         return response
@@ -190,52 +205,34 @@ class FullVehicleSimNode(Node):
         return [TopicValveController(self, timeout)]
 
     def _on_valve_state(self, msg: ValveState) -> None:
-        self.valve_answers[int(msg.step)] = (msg.front_spring, msg.front_damping,
-                                             msg.rear_spring, msg.rear_damping)
+        with self.valve_news:
+            self.valve_answers[int(msg.step)] = (msg.front_spring, msg.front_damping,
+                                                 msg.rear_spring, msg.rear_damping)
+            self.valve_news.notify_all()
 
     def destroy_node(self) -> None:
-        """Destroy the evaluate service's thread and the closed-loop node too."""
-        self.evaluate_service.destroy()
-        self.loop_executor.shutdown(timeout_sec=1.0)
-        self.loop_node.destroy_node()
+        """Close the FMU (if the worker runs one) too."""
+        if self.fmu is not None:
+            self.fmu.close()
         super().destroy_node()
 
     def publish_telemetry(self, histories: dict[str, np.ndarray], index: int = 0) -> None:
         """Publish the time histories of design ``index`` on the telemetry topics."""
         step = max(1, int(self.get_parameter('telemetry_decimation').value))
-        h = {name: np.asarray(value)[index] for name, value in histories.items()
-             if name != 't_s'}
-        for k in range(0, len(histories['t_s']), step):
-            now = stamp(self, float(histories['t_s'][k]))
-            imu = Imu()
-            imu.header.stamp, imu.header.frame_id = now, 'base_link'
-            (imu.orientation.x, imu.orientation.y, imu.orientation.z,
-             imu.orientation.w) = quaternion(math.radians(h['roll_deg'][k]),
-                                             float(h['pitch_rad'][k]), float(h['yaw_rad'][k]))
-            imu.angular_velocity.x = math.radians(h['roll_rate_deg_s'][k])
-            imu.angular_velocity.z = float(h['yaw_rate_radps'][k])
-            imu.linear_acceleration.y = float(h['lateral_accel_mps2'][k])
-            imu.linear_acceleration_covariance[0] = -1.0  # only lateral is known
-            self.pub['imu'].publish(imu)
-            self.pub['struts'].publish(JointState(
-                header=imu.header, name=CORNERS,
-                position=h['strut_stroke_m'][:, k].tolist(),
-                effort=h['strut_force_n'][:, k].tolist()))
-            self.pub['tyres'].publish(JointState(
-                header=imu.header, name=CORNERS, position=h['slip_angle_rad'][:, k].tolist(),
-                effort=h['tyre_fz_n'][:, k].tolist()))
-            self.pub['seats'].publish(JointState(
-                header=imu.header, name=['driver', 'passenger'],
-                effort=[float(h['acc_driver_mps2'][k]), float(h['acc_passenger_mps2'][k])]))
-            self.pub['steering'].publish(JointState(
-                header=imu.header, name=['front_road_wheel'],
-                position=[float(h['steer_rad'][k])],
-                velocity=[float(h['steer_rate_radps'][k])]))
+        for name, messages in telemetry_messages(histories, index, step).items():
+            for message in messages:
+                self.pub[name].publish(message)
 
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning full_vehicle_sim``."""
-    run_node(FullVehicleSimNode, args, multithreaded=True)
+    try:
+        run_node(FullVehicleSimNode, args)
+    except (FmuConfigError, MappingError) as error:
+        import rclpy
+        rclpy.try_shutdown()
+        print(f'full_vehicle_sim: not started: {error}', file=sys.stderr)
+        sys.exit(2)
 
 
 if __name__ == '__main__':

@@ -2,7 +2,11 @@
 
 Service ``~/calibrate`` (Calibrate): the eq. 25 scaling of the simplified model of a
 scenario onto the full model, from N full-model samples (default 30, paper 6.3.1)
-fetched over the graph from a simulation worker (``sim_service``) in one batch.  The
+fetched over the graph from the simulation workers (``sim_workers``; a batch is split
+over the live workers as the coordinator splits its own, and a worker that fails has
+its designs sent to another), a chunk of ``calibration_chunk`` designs at a time;
+after each chunk ``~/calibration_progress`` (CalibrationProgress) says how many of
+the samples are done, which the coordinator passes on in its action feedback.  The
 scaling is cached in ``calibration_dir`` under a key of scenario, n_vars, samples, seed
 and a hash of the model configuration, so it costs its N full runs once.
 
@@ -19,13 +23,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
-from suspension_tuning_interfaces.srv import Calibrate, EvaluateDesign, EvaluateGradient
+from suspension_tuning_interfaces.msg import CalibrationProgress
+from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning import simplified_inputs
-from suspension_tuning.nodes import _logging
-from suspension_tuning.nodes._service_calls import ServiceCaller, ServiceCallError
-from suspension_tuning.nodes._service_thread import ServiceLoop, ServiceThread
+from suspension_tuning.nodes._services import ServiceCallError, SimulationPool, serve
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.scaling import Scaling, scaling_key
 from suspension_tuning.optim.simplified_gradient import (
@@ -40,36 +45,39 @@ SCENARIOS = ('ride', 'handling')
 
 
 class GradientEvaluatorNode(Node):
-    """Service adapter over the eq. 25 calibration and the simplified gradient."""
+    """Service adapter over the eq. 25 calibration and the simplified gradient.
 
-    def __init__(self, service_loop: ServiceLoop | None = None, **kwargs) -> None:
-        """``service_loop``: serve ``gradient`` and ``calibrate`` on this shared loop.
+    Multi-threaded: ``calibrate`` waits for the simulation worker's response, which
+    the client's callback group takes meanwhile, and ``gradient`` (a callback group of
+    its own) is answered while a calibration runs.
+    """
 
-        By default ``gradient`` and ``calibrate`` have a loop (thread) each, and a
-        gradient is answered while a calibration runs.  On a shared loop, the
-        calibration's wait for the simulation worker answers the loop's requests
-        (the worker's ``evaluate`` among them, ``_service_calls.ServiceCaller``).
-        """
+    EXECUTOR = MultiThreadedExecutor
+
+    def __init__(self, **kwargs) -> None:
         super().__init__('gradient_evaluator', **kwargs)
-        self.declare_parameter('sim_service', '/full_vehicle_sim/evaluate')
+        self.declare_parameter('sim_workers', ['/full_vehicle_sim'])
         self.declare_parameter('calibration_dir', '')
         self.declare_parameter('default_samples', 30)
         self.declare_parameter('default_step', 0.025)
         self.declare_parameter('call_timeout_s', 600.0)
+        # Designs per progress step of a calibration (each step one batch to the workers).
+        self.declare_parameter('calibration_chunk', 6)
         directory = str(self.get_parameter('calibration_dir').value)
         self.calibration_dir = Path(directory or Path.home() / '.cache' / 'suspension_tuning'
                                     / 'calibration')
         self.scalings: dict[tuple[str, int], Scaling] = {}
-        self.caller = ServiceCaller(self, serve_loop=service_loop)
-        self.sim_client = self.caller.create_client(EvaluateDesign,
-                                                    str(self.get_parameter('sim_service').value))
         self.simplified_runs = 0
-        # Served outside the node's executor: no executor is in the path of a request.
-        self.service_threads = [
-            ServiceThread(self, EvaluateGradient, 'gradient', self._on_gradient,
-                          loop=service_loop),
-            ServiceThread(self, Calibrate, 'calibrate', self._on_calibrate,
-                          loop=service_loop)]
+        self.stopping = False  # set by destroy_node: a calibration stops waiting
+        self.pool = SimulationPool(self, list(self.get_parameter('sim_workers').value),
+                                   float(self.get_parameter('call_timeout_s').value),
+                                   ReentrantCallbackGroup(), lambda: self.stopping)
+        self.progress_pub = self.create_publisher(CalibrationProgress,
+                                                  '~/calibration_progress', 100)
+        serve(self, EvaluateGradient, '~/gradient', self._on_gradient,
+              MutuallyExclusiveCallbackGroup())
+        serve(self, Calibrate, '~/calibrate', self._on_calibrate,
+              MutuallyExclusiveCallbackGroup())
 
     # ---------------------------------------------------------------- calibrate
     def _cache_path(self, key: dict) -> Path:
@@ -116,8 +124,7 @@ class GradientEvaluatorNode(Node):
             response.r_squared.append(float(function.r2))
         response.success = True
         response.wall_time_s = time.monotonic() - start
-        _logging.info(
-            self,
+        self.get_logger().info(
             f'{scenario}/{n_vars} calibrated ({"cache" if response.from_cache else "full runs"}): '
             + ', '.join(f'{f.name} R2={f.r2:.3f}' if f.rule == 'eq25' else f'{f.name} {f.rule}'
                         for f in scaling.functions))
@@ -125,19 +132,29 @@ class GradientEvaluatorNode(Node):
 
     def _calibrate_remote(self, scenario: str, n_vars: int, x: np.ndarray,
                           key: dict) -> Scaling:
-        """Full-model samples from a simulation worker, then the eq. 25 fit."""
-        timeout = float(self.get_parameter('call_timeout_s').value)
+        """Full-model samples from the simulation workers, then the eq. 25 fit."""
         # Only the handling model needs each sample's inputs (simplified_inputs.py).
-        answer = self.caller.call(self.sim_client, EvaluateDesign.Request(
-            scenario=scenario, n_vars=n_vars, designs=x.ravel().tolist(),
-            return_inputs=scenario == 'handling', integrator=key.get('integrator', '')),
-            timeout)
-        if not answer.success:
-            raise ValueError(f'full-model samples failed: {answer.error}')
-        full_f = np.asarray(answer.f, dtype=float)
-        full_g = np.asarray(answer.g, dtype=float).reshape(len(x), answer.n_constraints)
+        start = time.monotonic()
+        chunk = max(1, int(self.get_parameter('calibration_chunk').value))
+        answers = []
+        for part in np.array_split(x, -(-len(x) // chunk)):
+            try:
+                answers += self.pool.evaluate(scenario, n_vars, part,
+                                              return_inputs=scenario == 'handling',
+                                              integrator=key.get('integrator', ''))
+            except ValueError as error:
+                raise ValueError(f'full-model samples failed: {error}') from error
+            self.progress_pub.publish(CalibrationProgress(
+                scenario=scenario, n_vars=n_vars,
+                samples_done=sum(a.n_designs for a in answers), samples_total=len(x),
+                wall_time_s=time.monotonic() - start))
+        full_f = np.concatenate([np.asarray(a.f, dtype=float) for a in answers])
+        full_g = np.concatenate([np.asarray(a.g, dtype=float).reshape(a.n_designs,
+                                                                      a.n_constraints)
+                                 for a in answers])
+        messages = [message for a in answers for message in a.inputs]
         inputs = [simplified_inputs.unpack(scenario, message, x[i])
-                  for i, message in enumerate(answer.inputs)] or None
+                  for i, message in enumerate(messages)] or None
         self.simplified_runs += len(x)
         return fit_calibration(scenario, n_vars, x, full_f, full_g, inputs, key)
 
@@ -178,16 +195,14 @@ class GradientEvaluatorNode(Node):
         return scenario, int(n_vars)
 
     def destroy_node(self) -> None:
-        """Destroy the service threads and the private client node too."""
-        for service in self.service_threads:
-            service.destroy()
-        self.caller.destroy()
+        """Let a calibration's wait end (within a second), then destroy the node."""
+        self.stopping = True
         super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning gradient_evaluator``."""
-    run_node(GradientEvaluatorNode, args, multithreaded=True)
+    run_node(GradientEvaluatorNode, args)
 
 
 if __name__ == '__main__':

@@ -43,7 +43,6 @@ from suspension_tuning.bag.definitions import (
 )
 from suspension_tuning.bag.recorder import RecordingSession
 from suspension_tuning.bag.writer import qos_profile_dict
-from suspension_tuning.nodes import _logging
 from suspension_tuning.nodes._spin import run_node
 
 #: Depth of the recorder's subscriptions: deep enough that a burst of telemetry (a 20 s
@@ -211,12 +210,12 @@ class RecorderNode(Node):
             return
         self.received += 1
         if closed is not None:  # once per run, on the message thread: the fast path
-            _logging.info(self, f'bag closed: {closed}')
+            self.get_logger().info(f'bag closed: {closed}')
 
     def _flush(self) -> None:
         closed = self.session.flush()
         if closed is not None:
-            _logging.info(self, f'bag closed: {closed}')
+            self.get_logger().info(f'bag closed: {closed}')
 
     def close(self) -> None:
         """Finalise the open bag."""
@@ -235,7 +234,7 @@ def main(args: list[str] | None = None) -> None:
     # Single-threaded: no callback blocks, and rclpy's MultiThreadedExecutor costs more
     # per message (benchmarks/bench_recorder.py, this 2-core machine: 3900-6100 against
     # 1900-2400 messages/s).
-    run_node(RecorderNode, args, multithreaded=False)
+    run_node(RecorderNode, args)
 
 
 if __name__ == '__main__':

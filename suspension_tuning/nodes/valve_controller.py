@@ -75,7 +75,7 @@ class ValveControllerNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning valve_controller``."""
-    run_node(ValveControllerNode, args, multithreaded=False)
+    run_node(ValveControllerNode, args)
 
 
 if __name__ == '__main__':

@@ -63,7 +63,10 @@ published rules as recalled [R]; the analytic tests decide):
 Interfaces: :class:`DynamicQ` is an ask/tell driver (the ROS coordinator
 asks for an evaluation or a gradient, performs it however it likes, tells
 the result and can stop between iterations); :func:`dynamic_q` runs it with
-two callables; :func:`minimize` is the drop-in for ``scipy.optimize.minimize``.
+two callables; :func:`minimize` is the drop-in for ``scipy.optimize.minimize``
+(counts as SciPy reports them: ``nfev`` every call of ``fun``, finite differences
+included, ``njev`` the gradient evaluations; an ``x0`` outside the bounds is
+clipped into them, as SLSQP and L-BFGS-B do).
 
 References
 ----------
@@ -371,8 +374,16 @@ def _as_vector(value: Any, name: str) -> Array:
 
 
 def _validate_problem(
-    x0: ArrayLike, lower: ArrayLike | None, upper: ArrayLike | None
+    x0: ArrayLike, lower: ArrayLike | None, upper: ArrayLike | None, clip: bool = False
 ) -> tuple[Array, Array, Array]:
+    """Check x0 and the bounds; return x0 (clipped into the bounds if ``clip``), lo, hi.
+
+    Raises
+    ------
+    ValueError
+        For a non-finite x0, malformed, NaN or inverted bounds, and (unless ``clip``)
+        an x0 outside the bounds.
+    """
     x = np.array(x0, dtype=float)
     if x.ndim != 1 or x.size == 0:
         raise ValueError(f'x0 must be a non-empty 1-D vector, got shape {x.shape}')
@@ -394,6 +405,8 @@ def _validate_problem(
     if np.any(lo > hi):
         bad = np.flatnonzero(lo > hi)
         raise ValueError(f'bounds inverted (lower > upper) for variable(s) {bad.tolist()}')
+    if clip:
+        return np.clip(x, lo, hi), lo, hi
     if np.any(x < lo) or np.any(x > hi):
         bad = np.flatnonzero((x < lo) | (x > hi))
         raise ValueError(f'x0 lies outside the bounds in variable(s) {bad.tolist()}: x0 = {x}')
@@ -429,6 +442,10 @@ class DynamicQ:
         run continues from the last record as if it had not stopped.
     gradient_source : str
         Name counted for gradients told without an explicit ``source``.
+    counters : callable, optional
+        ``counters() -> mapping`` of further counts (or counts that replace the
+        driver's own, such as ``nfev``) stored in every record and in the result;
+        :func:`minimize` reports the calls of the user's functions this way.
     """
 
     def __init__(
@@ -439,8 +456,10 @@ class DynamicQ:
         options: DynamicQOptions | Mapping[str, Any] | None = None,
         history: Sequence[Mapping[str, Any]] | None = None,
         gradient_source: str = 'user',
+        counters: Callable[[], Mapping[str, Any]] | None = None,
     ) -> None:
         self.x0, self.lower, self.upper = _validate_problem(x0, lower, upper)
+        self._extra_counters = counters
         self.options = DynamicQOptions.from_mapping(options)
         self.default_source = gradient_source
         self.history: list[dict[str, Any]] = []
@@ -545,12 +564,16 @@ class DynamicQ:
     # ---------------------------------------------------------------- private
     def _counters(self) -> dict[str, Any]:
         ngev = int(sum(self.ngev_by_source.values()))
-        return {
+        counts = {
             'nfev': self.nfev,
+            'n_evaluations': self.nfev,
             'ngev': ngev,
             'njev': ngev,
             'ngev_by_source': dict(self.ngev_by_source),
         }
+        if self._extra_counters is not None:
+            counts.update(self._extra_counters())
+        return counts
 
     def _iteration(self) -> int:
         return max(len(self.history) - 1, 0)
@@ -687,7 +710,7 @@ class DynamicQ:
         last = records[-1]
         self.history = records
         self._points = points
-        self.nfev = int(last.get('nfev', len(records)))
+        self.nfev = int(last.get('n_evaluations', last.get('nfev', len(records))))
         self.ngev_by_source = dict(last.get('ngev_by_source', {}))
         if 'rho_next' not in last:
             raise ValueError('history: the last record lacks field rho_next (move limit)')
@@ -817,6 +840,7 @@ def dynamic_q(
     callback: Callable[[OptimizeResult], Any] | None = None,
     history: Sequence[Mapping[str, Any]] | None = None,
     gradient_source: str | None = None,
+    counters: Callable[[], Mapping[str, Any]] | None = None,
 ) -> OptimizeResult:
     """Minimise f(x) s.t. g(x) <= 0, h(x) = 0, lower <= x <= upper (eqs. 1-3).
 
@@ -846,16 +870,21 @@ def dynamic_q(
     gradient_source : str, optional
         Name under which gradient evaluations are counted; defaults to the
         ``source`` attribute of ``gradient`` if present, else 'user'.
+    counters : callable, optional
+        Further counts for every record and the result (see :class:`DynamicQ`).
 
     Returns
     -------
     scipy.optimize.OptimizeResult
         x, fun (= f), g, h, success, status, message, nit (= iterations),
-        nfev, ngev (= njev), ngev_by_source, max_violation, rho, history,
-        x_best and f_best (best feasible point seen).
+        nfev (calls of ``evaluate``, = n_evaluations), ngev (= njev, calls of
+        ``gradient``), ngev_by_source, max_violation, rho, history, x_best and
+        f_best (best feasible point seen).
     """
     source = gradient_source or getattr(gradient, 'source', None) or 'user'
-    driver = DynamicQ(x0, lower, upper, options, history=history, gradient_source=source)
+    driver = DynamicQ(
+        x0, lower, upper, options, history=history, gradient_source=source, counters=counters
+    )
     while (request := driver.ask()) is not None:
         kind, x = request
         if kind == 'evaluate':
@@ -925,7 +954,8 @@ def minimize(
     fun : callable
         ``fun(x, *args) -> float`` (or ``(f, grad)`` when ``jac`` is True).
     x0 : array_like, shape (n,)
-        Starting point; must lie inside the bounds.
+        Starting point; must be finite.  A point outside the bounds is clipped
+        into them, as SciPy's bounded methods (SLSQP, L-BFGS-B) do.
     args : tuple
         Extra arguments of fun and jac.
     method : str, optional
@@ -958,9 +988,17 @@ def minimize(
     -------
     scipy.optimize.OptimizeResult
         As :func:`dynamic_q`; ``g`` is in the paper convention (g <= 0
-        feasible, i.e. minus SciPy's 'ineq' values); ``nfev_fd`` and
-        ``ncev_fd`` count the objective and constraint-function calls spent
-        on finite differences (not included in ``nfev``).
+        feasible, i.e. minus SciPy's 'ineq' values).  Counts as SciPy keeps
+        them: ``nfev`` every call of ``fun``, finite differences included
+        (with ``jac=True`` a point's ``(f, grad)`` is computed once);
+        ``njev`` the gradient evaluations (SLSQP's meaning: analytic or by
+        finite differences); ``constr_nfev`` per constraint dict, every call
+        of its ``fun``, and ``constr_njev`` the calls of its ``jac``
+        (trust-constr's meaning).  Further: ``nfev_fd`` and ``ncev_fd``, the
+        calls of ``fun`` and of the constraint functions spent on finite
+        differences (included in ``nfev`` and ``constr_nfev``), and
+        ``n_evaluations``, the points at which Dynamic-Q evaluated
+        (f, g, h).  With ``history`` every count continues the earlier run's.
     """
     if method is not None and method.lower().replace('_', '-') not in ('dynamic-q', 'dynamicq'):
         raise ValueError(f"method must be None or 'dynamic-q', got {method!r}")
@@ -970,7 +1008,7 @@ def minimize(
     if x0.ndim != 1 or x0.size == 0:
         raise ValueError(f'x0 must be a non-empty 1-D vector, got shape {x0.shape}')
     n = x0.size
-    lower, upper = _parse_bounds(bounds, n)
+    x0, lower, upper = _validate_problem(x0, *_parse_bounds(bounds, n), clip=True)
     opts = dict(options or {})
     fd_step = opts.pop('fd_step', None)
     history = opts.pop('history', None)
@@ -994,29 +1032,45 @@ def minimize(
         if con['type'] not in ('ineq', 'eq'):
             raise ValueError(f"constraint {k} type must be 'ineq' or 'eq', got {con['type']!r}")
 
-    counts = {'fun': 0, 'constraints': 0}
+    # Calls of the user's functions, continued from the history's last record if any.
+    last = dict(history[-1]) if history else {}
+    counts = {
+        'nfev': int(last.get('nfev', 0)),
+        'nfev_fd': int(last.get('nfev_fd', 0)),
+        'ncev_fd': int(last.get('ncev_fd', 0)),
+        'constr_nfev': [int(v) for v in last.get('constr_nfev', [0] * len(cons))],
+        'constr_njev': [int(v) for v in last.get('constr_njev', [0] * len(cons))],
+    }
+    if len(counts['constr_nfev']) != len(cons) or len(counts['constr_njev']) != len(cons):
+        raise ValueError(f'history counts {len(counts["constr_nfev"])} constraints, '
+                         f'the problem has {len(cons)}')
     jac_true = jac is True
-    fun_cache: dict[bytes, Any] = {}
+    memo: dict[str, Any] = {}
 
-    def call_fun(x: Array) -> float:
+    def call_fun(x: Array) -> Any:
+        """One call of fun (with jac=True its (f, grad) of the last point is kept)."""
+        if jac_true and memo.get('x') == x.tobytes():
+            return memo['value']
+        counts['nfev'] += 1
+        value = fun(x, *args)
         if jac_true:
-            key = x.tobytes()
-            if key not in fun_cache:
-                fun_cache.clear()
-                fun_cache[key] = fun(x, *args)
-            return float(fun_cache[key][0])
-        return float(fun(x, *args))
+            memo.update(x=x.tobytes(), value=value)
+        return value
+
+    def objective(x: Array) -> float:
+        return float(call_fun(x)[0] if jac_true else call_fun(x))
+
+    def call_con(k: int, x: Array) -> Array:
+        counts['constr_nfev'][k] += 1
+        value = cons[k]['fun'](x, *cons[k].get('args', ()))
+        return np.atleast_1d(np.asarray(value, dtype=float))
 
     def con_values(x: Array, kind: str) -> Array:
-        parts = [
-            np.atleast_1d(np.asarray(c['fun'](x, *c.get('args', ())), dtype=float))
-            for c in cons
-            if c['type'] == kind
-        ]
+        parts = [call_con(k, x) for k, c in enumerate(cons) if c['type'] == kind]
         return np.concatenate(parts) if parts else np.zeros(0)
 
     def evaluate(x: Array) -> tuple[float, Array, Array]:
-        return call_fun(x), -con_values(x, 'ineq'), con_values(x, 'eq')
+        return objective(x), -con_values(x, 'ineq'), con_values(x, 'eq')
 
     def fd(fun1: Callable[[Array], Any], x: Array, counter: str) -> Array:
         def batch(points: Array) -> Array:
@@ -1029,24 +1083,24 @@ def minimize(
 
     def con_jac(x: Array, kind: str) -> Array:
         rows = []
-        for c in cons:
+        for k, c in enumerate(cons):
             if c['type'] != kind:
                 continue
-            cargs = c.get('args', ())
             if c.get('jac') is not None:
-                j = np.asarray(c['jac'](x, *cargs), dtype=float)
+                counts['constr_njev'][k] += 1
+                j = np.asarray(c['jac'](x, *c.get('args', ())), dtype=float)
             else:
-                j = fd(lambda p, c=c, cargs=cargs: c['fun'](p, *cargs), x, 'constraints')
+                j = fd(lambda p, k=k: call_con(k, p), x, 'ncev_fd')
             rows.append(np.atleast_2d(j).reshape(-1, n))
         return np.vstack(rows) if rows else np.zeros((0, n))
 
     def gradient(x: Array) -> tuple[Array, Array, Array]:
         if jac_true:
-            df = np.asarray(fun(x, *args)[1], dtype=float)
+            df = np.asarray(call_fun(x)[1], dtype=float)
         elif callable(jac):
             df = np.asarray(jac(x, *args), dtype=float)
         else:
-            df = fd(call_fun, x, 'fun')
+            df = fd(objective, x, 'nfev_fd')
         return df, -con_jac(x, 'ineq'), con_jac(x, 'eq')
 
     all_analytic = analytic_f and all(c.get('jac') is not None for c in cons)
@@ -1065,7 +1119,16 @@ def minimize(
                 return callback(intermediate)
             return callback(np.copy(intermediate['x']))
 
-    res = dynamic_q(
+    def current_counts() -> dict[str, Any]:
+        return {
+            'nfev': counts['nfev'],
+            'nfev_fd': counts['nfev_fd'],
+            'ncev_fd': counts['ncev_fd'],
+            'constr_nfev': list(counts['constr_nfev']),
+            'constr_njev': list(counts['constr_njev']),
+        }
+
+    return dynamic_q(
         evaluate,
         gradient,
         x0,
@@ -1075,7 +1138,5 @@ def minimize(
         callback=wrapped_callback,
         history=history,
         gradient_source=source,
+        counters=current_counts,
     )
-    res['nfev_fd'] = counts['fun']
-    res['ncev_fd'] = counts['constraints']
-    return res

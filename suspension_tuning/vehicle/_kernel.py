@@ -121,7 +121,10 @@ H_FSTRUT0 = 22  # 4 strut forces
 H_PRESS0 = 26  # 4 gas pressures (absolute)
 H_ROAD0 = 30  # 4 road elevations under the wheels
 H_ZS, H_THETA = 34, 35
-N_HIST = 36
+H_AZ = 36  # vertical acceleration of the body's centre of mass (gravity removed)
+H_AX = 37  # longitudinal acceleration, udot - v r
+H_THETA_RATE = 38  # pitch rate
+N_HIST = 39
 N_WORK = 50
 
 # ---- internal controllers (driver and speed controller run inside the kernel) ---------
@@ -465,6 +468,9 @@ def deriv(
         hist[H_ROLL_R] = phr
         hist[H_ZS] = s[I_ZS]
         hist[H_THETA] = s[I_TH]
+        hist[H_AZ] = zdd
+        hist[H_AX] = acc[2] - v * r
+        hist[H_THETA_RATE] = s[I_VEL0 + 1]
 
 
 @njit(cache=True, fastmath=True)

@@ -230,6 +230,34 @@ def digital_gain(
     return np.abs(h)
 
 
+def weighted(
+    acc_mps2: np.ndarray,
+    fs_hz: float,
+    weighting: str | WeightingParameters = 'Wb',
+    prewarp_hz: float | None = None,
+) -> np.ndarray:
+    """Frequency-weighted acceleration time history (BS 6841 W_b by default).
+
+    The signal is filtered from rest (zero initial conditions) along its last axis with
+    :func:`wb_sos`; :func:`weighted_rms` is the RMS of this after a settling time.
+
+    Parameters
+    ----------
+    acc_mps2 : array_like
+        Vertical acceleration in m/s^2, shape (..., n_samples), uniformly sampled.
+    fs_hz : float
+        Sample rate in Hz (above twice the 100 Hz band limit, see :func:`wb_sos`).
+    weighting, prewarp_hz
+        As :func:`wb_sos`.
+
+    Returns
+    -------
+    np.ndarray
+        Weighted acceleration in m/s^2, the shape of ``acc_mps2``.
+    """
+    return signal.sosfilt(wb_sos(fs_hz, prewarp_hz, weighting), acc_mps2, axis=-1)
+
+
 def weighted_rms(
     acc_mps2: np.ndarray,
     fs_hz: float,
@@ -274,7 +302,6 @@ def weighted_rms(
             f'signal of {acc.shape[-1] / fs_hz:.3f} s is not longer than t_settle_s = '
             f'{t_settle_s} s'
         )
-    sos = wb_sos(fs_hz, prewarp_hz, weighting)
-    aw = signal.sosfilt(sos, acc, axis=-1)[..., n_skip:]
+    aw = weighted(acc, fs_hz, weighting, prewarp_hz)[..., n_skip:]
     out = np.sqrt(np.mean(aw * aw, axis=-1))
     return float(out) if out.ndim == 0 else out

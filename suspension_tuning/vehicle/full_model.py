@@ -932,7 +932,8 @@ class FullVehicleModel:
         Keys: lateral_accel_mps2, roll_rad, roll_rate_radps, yaw_rate_radps, steer_rad,
         steer_rate_radps, speed_mps, x_m, y_m, yaw_rad, strut_stroke_m, strut_force_n,
         strut_pressure_pa (absolute), tyre_fz_n, tyre_fy_n, slip_angle_rad,
-        acc_driver_mps2, acc_passenger_mps2.
+        acc_driver_mps2, acc_passenger_mps2, vertical_accel_mps2 (body centre of mass,
+        gravity removed), longitudinal_accel_mps2, pitch_rate_radps.
         """
         b = self.batch_size
         d = np.empty(K.N_STATE)
@@ -1031,6 +1032,9 @@ def outputs_from_channels(full: np.ndarray, hist: np.ndarray) -> dict[str, np.nd
         'road_under_wheel_m': h(K.H_ROAD0, 4),
         'heave_m': h(K.H_ZS),
         'pitch_rad': h(K.H_THETA),
+        'pitch_rate_radps': h(K.H_THETA_RATE),
+        'vertical_accel_mps2': h(K.H_AZ),
+        'longitudinal_accel_mps2': h(K.H_AX),
     }
 
 

@@ -5,7 +5,7 @@ and rear axle heave ``z_af``, ``z_ar``; all vertical positions up positive and m
 from static equilibrium on a flat road.  Each axle carries two 4S4 struts
 (``strut.strut_force``, the full model's strut) and two point-follower tyres that lose
 contact (eq. 19, ``tyre.vertical_force``).  The road is the left/right average of the
-tracks that the full model's wheels see (``full_model.RoadInput``: the same ISO 8608 road,
+tracks that the full model's wheels see (``full_model.RoadInput``: the same seeded road,
 enveloped over the tyre contact length) [P s.6.2]; the vehicle runs at the scenario's
 constant speed.
 

@@ -1,4 +1,12 @@
-"""Road profiles: ISO 8608 random roads (left and right tracks), discrete bumps, flat road.
+"""Road profiles: ISO 8608 random roads, sett pavings, discrete bumps, flat road.
+
+Two random road models, each with left and right wheel tracks (config/road.yaml, key
+``model``):
+
+* ``iso8608`` (:class:`RoadSpec`): a power-law ISO 8608 PSD, below;
+* ``sett_paving`` (:class:`SettPavingSpec`): an ISO 8608 bed plus a layer of stones of
+  random pitch and height with joints between them (:func:`sett_layer`), the model of the
+  Belgian paving (docs/belgian_paving.md).
 
 ISO 8608 displacement PSD (one-sided, m^2 per cycle/m = m^3; physics-reference 6.1):
 
@@ -143,8 +151,103 @@ class RoadSpec:
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(d) - names)
         if unknown:
-            raise ValueError(f'unknown RoadSpec keys {unknown}; valid keys: {sorted(names)}')
+            raise ValueError(f'unknown {cls.__name__} keys {unknown}; valid keys: {sorted(names)}')
         return cls(**d)
+
+
+SETT_LAYOUTS = ('rows', 'independent', 'identical')
+
+
+@dataclass(frozen=True)
+class SettPavingSpec(RoadSpec):
+    """A sett (cobblestone) paving: ISO 8608 base undulation plus a layer of stones.
+
+    The inherited fields describe the base: a smooth ISO 8608 surface (long waves of
+    the foundation on which the setts are bedded), synthesised exactly as a
+    :class:`RoadSpec` road.  On each wheel track a layer of setts is added: stones of
+    random length along the road, each with its own random height, separated by
+    joints.
+
+    * Stone pitch (stone plus its joint) along the road: uniform in
+      ``sett_length_m (1 -/+ sett_length_spread)``.
+    * Stone top: flat at a height ``h_i ~ N(0, sett_height_std_m^2)`` above the base,
+      independent from stone to stone (the random seating of hand-laid stones).
+    * Joint: the last ``joint_width_m`` of each pitch, its floor ``joint_depth_m`` below
+      the lower of the two stones beside it.
+    * ``sett_layout``: 'rows' - stones laid in transverse courses, so both tracks share
+      the course boundaries (joints at the same x) but run on different stones (own
+      heights); 'independent' - own courses and own stones per track; 'identical' -
+      the right track repeats the left one.  ``coherence_model='identical'`` makes the
+      stone layer identical too, so that setting still means z_right = z_left.
+
+    The sett layer's mean is removed, and the fade-in ``ramp_in_m`` applies to the sum.
+    The stones come from their own random stream (``default_rng([seed, 1])``), so the
+    base is bit for bit the :class:`RoadSpec` road of the same base fields.
+
+    Attributes
+    ----------
+    sett_length_m : float
+        Mean stone pitch along the road (stone plus joint), m.
+    sett_length_spread : float
+        Half-width of the uniform pitch distribution as a fraction of the mean, [0, 1).
+    sett_height_std_m : float
+        Standard deviation of the stone heights, m (>= 0).
+    joint_width_m : float
+        Joint width along the road, m (>= 0, below the shortest pitch).
+    joint_depth_m : float
+        Depth of the joint floor below the lower neighbouring stone, m (>= 0).
+    sett_layout : str
+        One of :data:`SETT_LAYOUTS`.
+    """
+
+    sett_length_m: float = 0.14
+    sett_length_spread: float = 0.3
+    sett_height_std_m: float = 0.01
+    joint_width_m: float = 0.02
+    joint_depth_m: float = 0.005
+    sett_layout: str = 'rows'
+
+    def __post_init__(self) -> None:
+        """Check the base fields (RoadSpec) and the sett fields (ValueError with the name)."""
+        super().__post_init__()
+        sett_fields = (
+            'sett_length_m',
+            'sett_length_spread',
+            'sett_height_std_m',
+            'joint_width_m',
+            'joint_depth_m',
+        )
+        for name in sett_fields:
+            v = getattr(self, name)
+            if not isinstance(v, numbers.Real) or not np.isfinite(v) or v < 0:
+                raise ValueError(f'SettPavingSpec.{name} must be a finite number >= 0, got {v!r}')
+        if self.sett_length_m <= 0:
+            raise ValueError(f'SettPavingSpec.sett_length_m must be > 0, got {self.sett_length_m}')
+        if self.sett_length_spread >= 1.0:
+            raise ValueError(
+                f'SettPavingSpec.sett_length_spread must lie in [0, 1), '
+                f'got {self.sett_length_spread}'
+            )
+        shortest = self.sett_length_m * (1.0 - self.sett_length_spread)
+        if self.joint_width_m >= shortest:
+            raise ValueError(
+                f'SettPavingSpec.joint_width_m = {self.joint_width_m} m must be shorter '
+                f'than the shortest stone pitch {shortest:.4g} m'
+            )
+        if shortest < 2.0 * self.dx_m:
+            raise ValueError(
+                f'the shortest stone pitch {shortest:.4g} m needs at least 2 samples of '
+                f'dx_m = {self.dx_m} m'
+            )
+        if self.sett_layout not in SETT_LAYOUTS:
+            raise ValueError(
+                f'SettPavingSpec.sett_layout must be one of {SETT_LAYOUTS}, '
+                f'got {self.sett_layout!r}'
+            )
+
+
+ROAD_MODELS: dict[str, type[RoadSpec]] = {'iso8608': RoadSpec, 'sett_paving': SettPavingSpec}
+"""Values of the ``model`` key of a road.yaml entry and the spec class each one builds."""
 
 
 def load_road_spec(name: str = 'belgian_paving', path: str | Path | None = None) -> RoadSpec:
@@ -167,7 +270,35 @@ def load_road_spec(name: str = 'belgian_paving', path: str | Path | None = None)
     roads = data.get('roads', {})
     if name not in roads:
         raise ValueError(f'road {name!r} not found in {p}; available: {sorted(roads)}')
-    return RoadSpec.from_yaml_dict(roads[name])
+    return road_spec_from_yaml_dict(roads[name])
+
+
+def road_spec_from_yaml_dict(d: dict) -> RoadSpec:
+    """Build an ISO 8608 or sett-paving spec from one entry of road.yaml.
+
+    Parameters
+    ----------
+    d : dict
+        Field names of the spec class plus an optional ``model`` key, one of
+        :data:`ROAD_MODELS` ('iso8608' when omitted).
+
+    Returns
+    -------
+    RoadSpec
+        A :class:`RoadSpec` or a :class:`SettPavingSpec`.
+
+    Raises
+    ------
+    ValueError
+        For an unknown model, unknown keys or invalid values.
+    """
+    if not isinstance(d, dict):
+        raise ValueError(f'road spec must be a mapping, got {type(d).__name__}')
+    fields = dict(d)
+    model = fields.pop('model', 'iso8608')
+    if model not in ROAD_MODELS:
+        raise ValueError(f'unknown road model {model!r}; valid models: {ROAD_MODELS}')
+    return ROAD_MODELS[model].from_yaml_dict(fields)
 
 
 def iso8608_psd(n_cyc_per_m: np.ndarray, spec: RoadSpec) -> np.ndarray:
@@ -371,21 +502,33 @@ def _ramp(x: np.ndarray, ramp_m: float) -> np.ndarray:
 
 
 def synthesise_tracks(spec: RoadSpec) -> RoadProfile:
-    """Synthesise left and right ISO 8608 tracks (deterministic for a given seed).
+    """Synthesise left and right tracks (deterministic for a given seed).
 
     Parameters
     ----------
-    spec : RoadSpec
-        Road specification.
+    spec : RoadSpec or SettPavingSpec
+        Road specification: an ISO 8608 road, or a sett paving (ISO 8608 base plus the
+        stone layer of :func:`sett_layer`).
 
     Returns
     -------
     RoadProfile
-        ``x_m = 0, dx, ..., N dx`` with ``N = round(length_m / dx_m)``; the last sample
-        repeats the first (the synthesised road is periodic with period N dx).
+        ``x_m = 0, dx, ..., N dx`` with ``N = round(length_m / dx_m)``.  For an ISO 8608
+        road the last sample repeats the first (the synthesised road is periodic with
+        period N dx); the stone layer of a sett paving is not periodic.
     """
     if not isinstance(spec, RoadSpec):
         raise ValueError(f'spec must be a RoadSpec, got {type(spec).__name__}')
+    x, z_left, z_right = _iso8608_tracks(spec)
+    if isinstance(spec, SettPavingSpec):
+        s_left, s_right = sett_layer(spec, x.size)
+        z_left, z_right = z_left + s_left, z_right + s_right
+    w = _ramp(x, spec.ramp_in_m)
+    return RoadProfile(x_m=x, z_left_m=z_left * w, z_right_m=z_right * w, spec=spec)
+
+
+def _iso8608_tracks(spec: RoadSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """x, z_left, z_right of the ISO 8608 part of ``spec`` (periodic, no fade-in), m."""
     n_pts = int(round(spec.length_m / spec.dx_m))
     period = n_pts * spec.dx_m
     dn = 1.0 / period
@@ -414,10 +557,111 @@ def synthesise_tracks(spec: RoadSpec) -> RoadProfile:
     z_left = np.fft.irfft(z1, n=n_pts)
     z_right = np.fft.irfft(zr, n=n_pts)
     x = np.arange(n_pts + 1) * spec.dx_m
-    z_left = np.append(z_left, z_left[0])
-    z_right = np.append(z_right, z_right[0])
-    w = _ramp(x, spec.ramp_in_m)
-    return RoadProfile(x_m=x, z_left_m=z_left * w, z_right_m=z_right * w, spec=spec)
+    return x, np.append(z_left, z_left[0]), np.append(z_right, z_right[0])
+
+
+def _sett_track(
+    x_m: np.ndarray, edges_m: np.ndarray, heights_m: np.ndarray, spec: SettPavingSpec
+) -> np.ndarray:
+    """Stone layer on one track: flat stone tops, joints at the end of each pitch, m."""
+    i = np.clip(np.searchsorted(edges_m, x_m, side='right') - 1, 0, heights_m.size - 2)
+    z = heights_m[i].copy()
+    if spec.joint_width_m > 0:
+        in_joint = x_m >= edges_m[i + 1] - spec.joint_width_m
+        floor = np.minimum(heights_m[i], heights_m[i + 1]) - spec.joint_depth_m
+        z = np.where(in_joint, floor, z)
+    return z
+
+
+def sett_layer(spec: SettPavingSpec, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return the stone layer of a sett paving on the left and right tracks.
+
+    Parameters
+    ----------
+    spec : SettPavingSpec
+        Paving specification (stone pitch, height spread, joints, layout, seed).
+    n_samples : int
+        Number of samples, at ``x = 0, dx_m, ...``.
+
+    Returns
+    -------
+    (np.ndarray, np.ndarray)
+        Left and right elevations, m, each of zero mean, shape (n_samples,).
+    """
+    if not isinstance(spec, SettPavingSpec):
+        raise ValueError(f'spec must be a SettPavingSpec, got {type(spec).__name__}')
+    rng = np.random.default_rng([spec.seed, 1])
+    x = np.arange(n_samples) * spec.dx_m
+    length = x[-1] + spec.dx_m
+    # enough pitches to cover the road (and the random shift of the first course) even
+    # if every stone is the shortest one
+    shortest = spec.sett_length_m * (1.0 - spec.sett_length_spread)
+    longest = spec.sett_length_m * (1.0 + spec.sett_length_spread)
+    n_stones = int(np.ceil((length + 2.0 * longest) / shortest)) + 1
+    layout = 'identical' if spec.coherence_model == 'identical' else spec.sett_layout
+
+    def edges() -> np.ndarray:
+        lo, hi = 1.0 - spec.sett_length_spread, 1.0 + spec.sett_length_spread
+        pitch = spec.sett_length_m * rng.uniform(lo, hi, n_stones)
+        # random phase of the first course so x = 0 is not always a joint
+        return np.concatenate(([0.0], np.cumsum(pitch))) - rng.uniform(0.0, pitch[0])
+
+    def heights() -> np.ndarray:
+        return spec.sett_height_std_m * rng.standard_normal(n_stones + 1)
+
+    e_left = edges()
+    h_left = heights()
+    if layout == 'identical':
+        e_right, h_right = e_left, h_left
+    elif layout == 'rows':
+        e_right, h_right = e_left, heights()
+    else:
+        e_right = edges()
+        h_right = heights()
+    z_left = _sett_track(x, e_left, h_left, spec)
+    z_right = _sett_track(x, e_right, h_right, spec)
+    return z_left - np.mean(z_left), z_right - np.mean(z_right)
+
+
+def sett_height_psd(n_cyc_per_m: np.ndarray, spec: SettPavingSpec) -> np.ndarray:
+    """Return the PSD of the stone layer without joints, m^3 (one-sided, per cycle/m).
+
+    For flat stones of independent heights (variance sigma^2) and independent pitches L
+    (a renewal process), the two-sided PSD in angular wavenumber is
+    ``sigma^2 E[|F_L|^2] / (2 pi E[L])`` with ``|F_L|^2 = 4 sin^2(k L / 2) / k^2``;
+    one-sided in cycles/m this is
+
+        G(n) = 2 sigma^2 E[sin^2(pi n L)] / (E[L] (pi n)^2),
+
+    and for L uniform in [a, b], ``E[sin^2(pi n L)] = 1/2 - (sin 2 pi n b - sin 2 pi n a)
+    / (4 pi n (b - a))``.  G(0) = 2 sigma^2 E[L^2] / E[L].  The joints add a little
+    short-wave power on top of this (their depth and width are small beside the stones).
+
+    Parameters
+    ----------
+    n_cyc_per_m : array_like
+        Spatial frequencies, cycles/m (> 0).
+    spec : SettPavingSpec
+        Paving specification.
+
+    Returns
+    -------
+    np.ndarray
+        G(n), m^2/(cycle/m).
+    """
+    n = np.asarray(n_cyc_per_m, dtype=float)
+    if np.any(n <= 0) or np.any(~np.isfinite(n)):
+        raise ValueError('sett_height_psd needs finite spatial frequencies > 0')
+    mean = spec.sett_length_m
+    half = spec.sett_length_spread * mean
+    a, b = mean - half, mean + half
+    if half > 0:
+        e_sin2 = 0.5 - (np.sin(2 * np.pi * n * b) - np.sin(2 * np.pi * n * a)) / (
+            4 * np.pi * n * (b - a)
+        )
+    else:
+        e_sin2 = np.sin(np.pi * n * mean) ** 2
+    return 2.0 * spec.sett_height_std_m**2 * e_sin2 / (mean * (np.pi * n) ** 2)
 
 
 def smooth_road(length_m: float, dx_m: float = 0.01) -> RoadProfile:

@@ -7,7 +7,7 @@ ride needs nothing from the run).  The ROS gradient node can cache one per itera
 
 :func:`run_simplified` evaluates f (eq. 9 or 10) and g (eq. 11, FL, FR, RL, RR) of a batch
 of designs with the pitch-plane ride model or the handling model.  Models are cached per
-process (building the ride road costs one ISO 8608 synthesis).
+process (building the ride road costs one road synthesis).
 """
 
 from __future__ import annotations

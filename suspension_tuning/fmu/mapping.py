@@ -1,0 +1,308 @@
+"""The mapping file of an FMU worker: which FMU variables carry what (docs/fmu.md).
+
+:func:`load_mapping` reads and checks the YAML file alone (names, numbers, units,
+required channels); :class:`suspension_tuning.fmu.model.FmuModel` then checks it
+against the FMU.  Every problem is a :class:`MappingError` naming the key.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from suspension_tuning.fmu.units import UNITS, known_units
+
+CORNERS = ('fl', 'fr', 'rl', 'rr')
+DESIGN_KEYS = ('dpsf_front', 'gas_volume_front', 'dpsf_rear', 'gas_volume_rear')
+DESIGN_QUANTITIES = {'dpsf_front': 'dimensionless', 'dpsf_rear': 'dimensionless',
+                     'gas_volume_front': 'volume', 'gas_volume_rear': 'volume'}
+#: Output channels: dimension, per wheel, and the scenarios needing them.
+OUTPUTS: dict[str, tuple[str, bool, tuple[str, ...]]] = {
+    'acc_driver': ('acceleration', False, ('ride',)),
+    'acc_passenger': ('acceleration', False, ('ride',)),
+    'roll': ('angle', False, ('handling',)),
+    'roll_rate': ('angular_velocity', False, ('handling',)),
+    'tyre_fz': ('force', True, ('ride', 'handling')),
+    'steer': ('angle', False, ('handling',)),
+    'slip_angle': ('angle', True, ('handling',)),
+    'x': ('length', False, ()),
+    'speed': ('velocity', False, ()),
+}
+SCENARIO_KEYS = {
+    'common': ('start_time_s', 'stop_time_s', 'step_size_s', 'speed_kmh', 'speed_parameter',
+               'parameters', 'design', 'outputs'),
+    'ride': ('settle_s', 'road'),
+    'handling': ('windows',),
+}
+ROAD_KEYS = ('road', 'wheelbase_m', 'start_rear_axle_at_m', 'contact_length_m', 'inputs',
+             'unit')
+
+
+class MappingError(ValueError):
+    """A mapping file that cannot be used (the message names the key)."""
+
+
+@dataclass(frozen=True)
+class VariableRef:
+    """One FMU variable the mapping names.
+
+    Attributes
+    ----------
+    name : str
+        The FMU's variable name.
+    quantity : str
+        Dimension the tool expects (``units.DIMENSIONS``).
+    unit : str or None
+        Unit the mapping states (used where the FMU declares none).
+    where : str
+        Key path in the mapping, for messages.
+    """
+
+    name: str
+    quantity: str
+    unit: str | None
+    where: str
+
+
+@dataclass(frozen=True)
+class RoadInputs:
+    """Road elevation under each wheel that the worker feeds the FMU (ride).
+
+    ``road`` is a key of config/road.yaml (None: the ride scenario's road of
+    config/scenarios.yaml); the rear axle starts at ``start_rear_axle_at_m`` and the
+    front axle ``wheelbase_m`` ahead, both at the scenario's speed; each track is
+    averaged over ``contact_length_m`` (0: point follower).
+    """
+
+    road: str | None
+    wheelbase_m: float
+    start_rear_axle_at_m: float
+    contact_length_m: float
+    inputs: dict[str, VariableRef]
+
+
+@dataclass(frozen=True)
+class ScenarioMapping:
+    """How one scenario runs on the FMU."""
+
+    name: str
+    start_time_s: float
+    stop_time_s: float
+    step_size_s: float
+    speed_kmh: float
+    speed_parameter: VariableRef | None
+    parameters: dict[str, float | int | bool]
+    design: dict[str, VariableRef]
+    outputs: dict[str, VariableRef]
+    settle_s: float = 0.0
+    road: RoadInputs | None = None
+    windows: dict[str, tuple[float, float]] | None = None
+
+    @property
+    def n_steps(self) -> int:
+        """Communication steps from start to stop time."""
+        return int(round((self.stop_time_s - self.start_time_s) / self.step_size_s))
+
+
+@dataclass(frozen=True)
+class FmuMapping:
+    """A checked mapping file."""
+
+    scenarios: dict[str, ScenarioMapping]
+    path: Path | None = None
+    text: str = field(default='', repr=False)
+
+
+def _keys(d: Any, where: str, allowed: tuple[str, ...], required: tuple[str, ...] = ()) -> dict:
+    if not isinstance(d, dict):
+        raise MappingError(f'{where}: expected a mapping of keys, got {type(d).__name__}')
+    unknown = sorted(set(map(str, d)) - set(allowed))
+    if unknown:
+        raise MappingError(f'{where}: unknown key(s) {unknown}; valid keys: {list(allowed)}')
+    missing = [k for k in required if k not in d]
+    if missing:
+        raise MappingError(f'{where}: missing key(s) {missing}')
+    return d
+
+
+def _number(d: dict, key: str, where: str, default: float | None = None,
+            positive: bool = False, minimum: float | None = None) -> float:
+    if key not in d:
+        if default is None:
+            raise MappingError(f'{where}.{key}: missing')
+        return default
+    value = d[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise MappingError(f'{where}.{key}: expected a finite number, got {value!r}')
+    if positive and value <= 0:
+        raise MappingError(f'{where}.{key}: must be > 0, got {value!r}')
+    if minimum is not None and value < minimum:
+        raise MappingError(f'{where}.{key}: must be >= {minimum}, got {value!r}')
+    return float(value)
+
+
+def _ref(value: Any, quantity: str, where: str) -> VariableRef:
+    """A variable entry: ``name`` or ``{name: ..., unit: ...}``."""
+    if isinstance(value, str):
+        name, unit = value, None
+    else:
+        d = _keys(value, where, ('name', 'unit'), ('name',))
+        name, unit = d['name'], d.get('unit')
+    if not isinstance(name, str) or not name:
+        raise MappingError(f'{where}.name: expected an FMU variable name, got {name!r}')
+    if unit is not None:
+        unit = str(unit)
+        if unit not in UNITS or UNITS[unit][0] != quantity:
+            raise MappingError(f'{where}.unit: {unit!r} is not a unit of {quantity} this tool '
+                               f'knows ({known_units(quantity)})')
+    return VariableRef(name, quantity, unit, where)
+
+
+def _corners(value: Any, quantity: str, where: str) -> dict[str, VariableRef]:
+    """Per-wheel entry: ``{fl: name, fr: name, rl: name, rr: name, unit: ...}``."""
+    d = _keys(value, where, (*CORNERS, 'unit'), CORNERS)
+    unit = d.get('unit')
+    return {c: _ref(d[c] if unit is None or not isinstance(d[c], str)
+                    else {'name': d[c], 'unit': unit}, quantity, f'{where}.{c}')
+            for c in CORNERS}
+
+
+def _design(value: Any, where: str) -> dict[str, VariableRef]:
+    d = _keys(value, where, DESIGN_KEYS, DESIGN_KEYS)
+    return {k: _ref(d[k], DESIGN_QUANTITIES[k], f'{where}.{k}') for k in DESIGN_KEYS}
+
+
+def _outputs(value: Any, name: str, where: str) -> dict[str, VariableRef]:
+    d = _keys(value, where, tuple(OUTPUTS))
+    out: dict[str, VariableRef] = {}
+    for key, entry in d.items():
+        quantity, per_wheel, _ = OUTPUTS[key]
+        if per_wheel:
+            for c, ref in _corners(entry, quantity, f'{where}.{key}').items():
+                out[f'{key}_{c}'] = ref
+        else:
+            out[key] = _ref(entry, quantity, f'{where}.{key}')
+    missing = [k for k, (_, _, needed) in OUTPUTS.items() if name in needed
+               and k not in d]
+    if missing:
+        raise MappingError(f'{where}: the {name} scenario needs output(s) {missing}')
+    return out
+
+
+def _parameters(value: Any, where: str) -> dict[str, float | int | bool]:
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise MappingError(f'{where}: expected a mapping of FMU parameter names to values')
+    for key, v in value.items():
+        if not isinstance(v, (bool, int, float)) or (
+                isinstance(v, float) and not math.isfinite(v)):
+            raise MappingError(f'{where}.{key}: expected a number or true/false, got {v!r}')
+    return {str(k): v for k, v in value.items()}
+
+
+def _road(value: Any, where: str) -> RoadInputs:
+    d = _keys(value, where, ROAD_KEYS, ('wheelbase_m', 'inputs'))
+    road = d.get('road')
+    if road is not None and not isinstance(road, str):
+        raise MappingError(f'{where}.road: expected a key of config/road.yaml, got {road!r}')
+    inputs = dict(d['inputs']) if isinstance(d['inputs'], dict) else d['inputs']
+    if isinstance(inputs, dict) and 'unit' in d:
+        inputs['unit'] = d['unit']
+    return RoadInputs(road=road,
+                      wheelbase_m=_number(d, 'wheelbase_m', where, positive=True),
+                      start_rear_axle_at_m=_number(d, 'start_rear_axle_at_m', where, 0.5,
+                                                   minimum=0.0),
+                      contact_length_m=_number(d, 'contact_length_m', where, 0.0, minimum=0.0),
+                      inputs=_corners(inputs, 'length', f'{where}.inputs'))
+
+
+def _window(value: Any, where: str) -> tuple[float, float]:
+    if (not isinstance(value, (list, tuple)) or len(value) != 2
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+            or not value[1] > value[0]):
+        raise MappingError(f'{where}: expected [start_s, end_s] with end > start, got {value!r}')
+    return float(value[0]), float(value[1])
+
+
+def _scenario(name: str, d: Any, design: Any, where: str) -> ScenarioMapping:
+    d = _keys(d, where, (*SCENARIO_KEYS['common'], *SCENARIO_KEYS[name]),
+              ('stop_time_s', 'step_size_s', 'speed_kmh', 'outputs'))
+    start = _number(d, 'start_time_s', where, 0.0)
+    stop = _number(d, 'stop_time_s', where)
+    step = _number(d, 'step_size_s', where, positive=True)
+    if stop <= start:
+        raise MappingError(f'{where}.stop_time_s: must be after start_time_s ({start} s)')
+    n = (stop - start) / step
+    if abs(n - round(n)) > 1e-6 * max(1.0, n) or round(n) < 3:
+        raise MappingError(f'{where}.step_size_s: {step} s must divide stop - start '
+                           f'({stop - start} s) into at least 3 steps')
+    if 'design' in d:
+        design = d['design']
+        design_where = f'{where}.design'
+    else:
+        design_where = 'design'
+    if design is None:
+        raise MappingError(f'{where}: no design section (top-level or in the scenario)')
+    windows = None
+    if name == 'handling' and d.get('windows') is not None:
+        w = _keys(d['windows'], f'{where}.windows', ('first_lane_change_s', 'manoeuvre_s'),
+                  ('first_lane_change_s', 'manoeuvre_s'))
+        windows = {k: _window(v, f'{where}.windows.{k}') for k, v in w.items()}
+    outputs = _outputs(d['outputs'], name, f'{where}.outputs')
+    if name == 'handling' and windows is None and 'x' not in outputs:
+        raise MappingError(f'{where}: the handling metrics need their time windows: give '
+                           'windows (first_lane_change_s, manoeuvre_s) or an x output '
+                           '(position along the track, config/scenarios.yaml)')
+    settle = _number(d, 'settle_s', where, 0.0, minimum=0.0) if name == 'ride' else 0.0
+    if settle >= stop - start - 2 * step:
+        raise MappingError(f'{where}.settle_s: {settle} s leaves nothing of the run')
+    speed_param = d.get('speed_parameter')
+    design_refs = _design(design, design_where)
+    parameters = _parameters(d.get('parameters'), f'{where}.parameters')
+    twice = sorted(set(parameters) & {ref.name for ref in design_refs.values()})
+    if twice:
+        raise MappingError(f'{where}.parameters: {twice} also receive design variables')
+    return ScenarioMapping(
+        name=name, start_time_s=start, stop_time_s=stop, step_size_s=step,
+        speed_kmh=_number(d, 'speed_kmh', where, positive=True),
+        speed_parameter=None if speed_param is None else _ref(
+            speed_param, 'velocity', f'{where}.speed_parameter'),
+        parameters=parameters, design=design_refs, outputs=outputs, settle_s=settle,
+        road=_road(d['road'], f'{where}.road') if d.get('road') is not None else None,
+        windows=windows)
+
+
+def parse_mapping(text: str, path: Path | None = None) -> FmuMapping:
+    """Check a mapping given as YAML text (see docs/fmu.md)."""
+    source = str(path) if path is not None else 'mapping'
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        raise MappingError(f'{source}: not valid YAML: {error}') from None
+    d = _keys(data, source, ('design', 'scenarios'), ('scenarios',))
+    scen = _keys(d['scenarios'], 'scenarios', ('ride', 'handling'))
+    if not scen:
+        raise MappingError('scenarios: name at least one of ride, handling')
+    return FmuMapping({name: _scenario(name, body, d.get('design'), f'scenarios.{name}')
+                       for name, body in scen.items()}, path, text)
+
+
+def load_mapping(path: str | Path) -> FmuMapping:
+    """Read and check a mapping file.
+
+    Raises
+    ------
+    MappingError
+        Unreadable file, bad YAML, unknown or missing keys, bad numbers or units.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except OSError as error:
+        raise MappingError(f'fmu_mapping {p}: cannot read it ({error.strerror})') from None
+    return parse_mapping(text, p)

@@ -1,0 +1,496 @@
+"""A user's full vehicle model as a Functional Mock-up Unit (FMI 2.0 / 3.0 co-simulation).
+
+:class:`FmuModel` opens an FMU with FMPy and a mapping file (docs/fmu.md) and checks
+them together at construction: the file opens, it is a co-simulation FMU of FMI 2.0 or
+3.0 with a binary for this platform, and every mapped name exists with a fitting
+causality (parameter / input / output), a real type and, where the FMU declares one,
+a unit of the right dimension.  Every problem found is one line of the
+:class:`FmuConfigError`, naming the variable.
+
+:meth:`FmuModel.evaluate` runs a batch of designs, each on a fresh instance of the
+FMU: the design's physical settings (eq. 4 inverse, section 5.1) go to the mapped
+parameters, the road under each wheel (ride, when the FMU takes it) comes from the
+road model at the mapped speed and wheelbase, and the sampled outputs are scored by
+the same code as the built-in model
+(:func:`suspension_tuning.vehicle.scenarios.ride_objective`, BS 6841 W_b weighting
+applied here; :func:`~suspension_tuning.vehicle.scenarios.handling_objective`).  It
+returns what :func:`suspension_tuning.evaluation.evaluate` returns.  A design whose
+run fails, stops early or gives a non-finite output raises :class:`FmuRunError`
+naming the design.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import shutil
+import tempfile
+import time
+import zipfile
+from pathlib import Path
+from typing import Any
+from xml.etree import ElementTree
+
+import numpy as np
+
+from suspension_tuning.evaluation import DesignEvaluation, metric_table
+from suspension_tuning.fmu.mapping import CORNERS, FmuMapping, ScenarioMapping, load_mapping
+from suspension_tuning.fmu.units import Conversion, resolve
+from suspension_tuning.vehicle import design as design_mod
+from suspension_tuning.vehicle import road as road_mod
+from suspension_tuning.vehicle import scenarios as scen
+from suspension_tuning.vehicle.full_model import RoadInput
+from suspension_tuning.vehicle.params import load_scenarios_config, load_vehicle_params
+
+FMI_VERSIONS = ('2.0', '3.0')
+REAL_TYPES = ('Real', 'Float64', 'Float32')
+#: Causalities a mapped variable may have, by its role.
+PARAMETER_CAUSALITIES = ('parameter',)
+INPUT_CAUSALITIES = ('input',)
+OUTPUT_CAUSALITIES = ('output',)
+#: fmi2Fatal / fmi3Fatal: the instance may not be called again.
+FMI_FATAL = 4
+#: FMU libraries of closed models, kept loaded (FmuModel.close).
+_LOADED_LIBRARIES: list = []
+
+
+class FmuConfigError(ValueError):
+    """An FMU or mapping that cannot serve (one line per problem, each naming it)."""
+
+
+class FmuRunError(RuntimeError):
+    """A design whose FMU run failed, stopped early, or gave NaN or infinite outputs."""
+
+
+def _require_fmpy():
+    try:
+        import fmpy
+    except ImportError:  # pragma: no cover - fmpy is in requirements.txt
+        raise FmuConfigError('the FMU worker needs FMPy (pip install fmpy)') from None
+    return fmpy
+
+
+class FmuModel:
+    """A checked FMU with its mapping, evaluating designs like the built-in model.
+
+    Parameters
+    ----------
+    fmu_path : str or Path
+        The .fmu file.
+    mapping : FmuMapping, str or Path
+        The mapping (see docs/fmu.md), or the path of its YAML file.
+
+    Raises
+    ------
+    FmuConfigError
+        The file is not a readable FMU, not co-simulation, of an unsupported FMI version
+        or without a binary for this platform, or a mapped name does not fit it (each
+        problem on its own line, naming the variable).
+    MappingError
+        The mapping file itself is bad.
+    """
+
+    def __init__(self, fmu_path: str | Path, mapping: FmuMapping | str | Path) -> None:
+        fmpy = _require_fmpy()
+        from fmpy.model_description import read_model_description
+
+        self.path = Path(fmu_path)
+        self.mapping = mapping if isinstance(mapping, FmuMapping) else load_mapping(mapping)
+        if not self.path.is_file():
+            raise FmuConfigError(f'fmu_path {self.path}: no such file')
+        try:
+            with zipfile.ZipFile(self.path) as archive:
+                version = ElementTree.fromstring(
+                    archive.read('modelDescription.xml')).get('fmiVersion')
+            if version not in FMI_VERSIONS:
+                raise FmuConfigError(f'{self.path.name}: FMI {version} is not supported '
+                                     f'(FMI {" or ".join(FMI_VERSIONS)} co-simulation)')
+            md = read_model_description(str(self.path), validate=False)
+        except FmuConfigError:
+            raise
+        except Exception as error:  # noqa: BLE001 - any reader failure: not an FMU
+            raise FmuConfigError(f'{self.path.name}: not a readable FMU ({error})') from None
+        self.model_description = md
+        if md.coSimulation is None:
+            raise FmuConfigError(f'{self.path.name}: not a co-simulation FMU (it offers '
+                                 'model exchange only; export it for co-simulation)')
+        platform = fmpy.platform if md.fmiVersion == '2.0' else fmpy.platform_tuple
+        binary = (f'binaries/{platform}/{md.coSimulation.modelIdentifier}'
+                  f'{fmpy.sharedLibraryExtension}')
+        with zipfile.ZipFile(self.path) as archive:
+            names = archive.namelist()
+        if binary not in names:
+            folders = sorted({n.split('/')[1] for n in names
+                              if n.startswith('binaries/') and n.count('/') >= 2})
+            raise FmuConfigError(f'{self.path.name}: no binary for this platform ({platform}: '
+                                 f'{binary}); it has {folders or "no binaries"}')
+        self.variables = {v.name: v for v in md.modelVariables}
+        units = {u.name: u for u in (md.unitDefinitions or [])}
+        problems: list[str] = []
+        self.conversions: dict[str, dict[str, Conversion]] = {}
+        for name, sm in self.mapping.scenarios.items():
+            conv: dict[str, Conversion] = {}
+            for key, ref in sm.design.items():
+                conv[f'design.{key}'] = self._check(ref, PARAMETER_CAUSALITIES, units, problems)
+            if sm.speed_parameter is not None:
+                conv['speed_parameter'] = self._check(sm.speed_parameter, PARAMETER_CAUSALITIES,
+                                                      units, problems)
+            for key, ref in sm.outputs.items():
+                conv[f'outputs.{key}'] = self._check(ref, OUTPUT_CAUSALITIES, units, problems)
+            if sm.road is not None:
+                for c, ref in sm.road.inputs.items():
+                    conv[f'road.{c}'] = self._check(ref, INPUT_CAUSALITIES, units, problems)
+            for pname in sm.parameters:
+                self._check_fixed(sm, pname, problems)
+            self.conversions[name] = conv
+        if problems:
+            raise FmuConfigError(f'{self.path.name} does not fit the mapping '
+                                 f'{self.mapping.path or ""}:\n  ' + '\n  '.join(problems))
+        self.roads = {name: self._road(sm) for name, sm in self.mapping.scenarios.items()
+                      if sm.road is not None}
+        self._track = None
+        if 'handling' in self.mapping.scenarios and self.mapping.scenarios['handling'].windows \
+                is None:
+            self._track = scen.handling_setup(load_vehicle_params(),
+                                              load_scenarios_config()['handling'])[0]
+        with open(self.path, 'rb') as f:
+            self.sha256 = hashlib.sha256(f.read()).hexdigest()
+        self._unzipdir = tempfile.mkdtemp(prefix='fmu_')
+        try:
+            fmpy.extract(str(self.path), unzipdir=self._unzipdir)
+            # Held for the model's life: the shared library loads once (and is checked to
+            # load now); each design's instance below takes and drops its own reference.
+            self._library = self._slave('check')
+        except Exception as error:
+            shutil.rmtree(self._unzipdir, ignore_errors=True)
+            raise FmuConfigError(f'{self.path.name}: its binary does not load ({error})') \
+                from None
+
+    # ------------------------------------------------------------------ checks
+    def _check(self, ref, causalities, units, problems) -> Conversion:
+        v = self.variables.get(ref.name)
+        if v is None:
+            problems.append(f'{ref.where}: the FMU has no variable {ref.name!r}')
+            return Conversion('')
+        bad = []
+        if v.causality not in causalities:
+            bad.append(f'causality {v.causality!r}, expected {" or ".join(causalities)}')
+        if v.type not in REAL_TYPES:
+            bad.append(f'type {v.type}, expected a real ({", ".join(REAL_TYPES)})')
+        declared = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
+        try:
+            conversion = resolve(ref.quantity, declared, ref.unit, units)
+        except ValueError as error:
+            bad.append(str(error))
+            conversion = Conversion('')
+        if bad:
+            problems.append(f'{ref.where}: FMU variable {ref.name!r} has ' + '; '.join(bad))
+        return conversion
+
+    def _check_fixed(self, sm: ScenarioMapping, name: str, problems: list[str]) -> None:
+        v = self.variables.get(name)
+        where = f'scenarios.{sm.name}.parameters.{name}'
+        if v is None:
+            problems.append(f'{where}: the FMU has no variable {name!r}')
+        elif v.causality not in (*PARAMETER_CAUSALITIES, *INPUT_CAUSALITIES):
+            problems.append(f'{where}: FMU variable {name!r} has causality {v.causality!r}, '
+                            'expected parameter or input')
+        elif v.type == 'String' or v.type == 'Binary' or v.type == 'Clock':
+            problems.append(f'{where}: FMU variable {name!r} has type {v.type}, expected a '
+                            'number or a Boolean')
+
+    def _road(self, sm: ScenarioMapping) -> RoadInput:
+        ri = sm.road
+        where = f'scenarios.{sm.name}.road'
+        try:
+            spec = (road_mod.load_road_spec(ri.road) if ri.road is not None
+                    else scen.ride_road_spec(load_scenarios_config()['ride']))
+        except ValueError as error:
+            raise FmuConfigError(f'{where}.road: {error}') from None
+        profile = road_mod.synthesise_tracks(spec)
+        x_end = (ri.start_rear_axle_at_m + ri.wheelbase_m
+                 + sm.speed_kmh / 3.6 * (sm.stop_time_s - sm.start_time_s))
+        if x_end > profile.length_m:
+            raise FmuConfigError(f'{where}: the front wheels reach {x_end:.1f} m, beyond the '
+                                 f'end of the road ({profile.length_m:.1f} m)')
+        return RoadInput.from_profile(profile, ri.contact_length_m)
+
+    # ------------------------------------------------------------------ description
+    def description(self) -> dict[str, Any]:
+        """What a run's configuration records about this model (file, identity, mapping)."""
+        md = self.model_description
+        token = 'guid' if md.fmiVersion == '2.0' else 'instantiation_token'
+        return {
+            'model': 'fmu',
+            'fmu_file': self.path.name,
+            'fmu_path': str(self.path.resolve()),
+            'fmu_sha256': self.sha256,
+            'fmi_version': md.fmiVersion,
+            token: md.guid,  # FMPy reads FMI 3.0's instantiationToken into guid
+            'model_name': md.modelName,
+            'generation_tool': md.generationTool,
+            'fmu_mapping': str(self.mapping.path.resolve()) if self.mapping.path else '',
+            'mapping': self.mapping.text,
+        }
+
+    def scenarios(self) -> tuple[str, ...]:
+        """The scenarios the mapping serves."""
+        return tuple(self.mapping.scenarios)
+
+    # ------------------------------------------------------------------ running
+    def _slave(self, instance_name: str):
+        md = self.model_description
+        if md.fmiVersion == '2.0':
+            from fmpy.fmi2 import FMU2Slave
+            return FMU2Slave(guid=md.guid, unzipDirectory=self._unzipdir,
+                             modelIdentifier=md.coSimulation.modelIdentifier,
+                             instanceName=instance_name)
+        from fmpy.fmi3 import FMU3Slave
+        return FMU3Slave(guid=md.guid, unzipDirectory=self._unzipdir,
+                         modelIdentifier=md.coSimulation.modelIdentifier,
+                         instanceName=instance_name)
+
+    def _set(self, slave, name: str, value) -> None:
+        v = self.variables[name]
+        vr = [v.valueReference]
+        fmi3 = self.model_description.fmiVersion == '3.0'
+        if v.type in REAL_TYPES:
+            (slave.setFloat64 if fmi3 else slave.setReal)(vr, [float(value)])
+        elif v.type == 'Boolean':
+            slave.setBoolean(vr, [bool(value)])
+        elif not fmi3:
+            slave.setInteger(vr, [int(value)])
+        else:
+            setter = {'Int64': slave.setInt64, 'UInt64': slave.setUInt64}.get(
+                v.type, getattr(slave, f'set{v.type}', slave.setInt32))
+            setter(vr, [int(value)])
+
+    def _parameter_values(self, sm: ScenarioMapping, x: np.ndarray) -> list[dict]:
+        """FMU parameter values (FMU units) of each design: fixed, speed, design."""
+        phys = design_mod.to_physical(x, x.shape[1])
+        si = {'dpsf_front': phys.dpsf_front, 'dpsf_rear': phys.dpsf_rear,
+              'gas_volume_front': phys.gas_volume_front_m3,
+              'gas_volume_rear': phys.gas_volume_rear_m3}
+        conv = self.conversions[sm.name]
+        out = []
+        for i in range(len(x)):
+            values: dict[str, Any] = dict(sm.parameters)
+            if sm.speed_parameter is not None:
+                values[sm.speed_parameter.name] = conv['speed_parameter'].to_fmu(
+                    sm.speed_kmh / 3.6)
+            designed: dict[str, float] = {}
+            for key, ref in sm.design.items():
+                value = float(conv[f'design.{key}'].to_fmu(si[key][i]))
+                if ref.name in designed and not np.isclose(designed[ref.name], value,
+                                                           rtol=1e-12, atol=0.0):
+                    raise ValueError(f'design {i}: FMU parameter {ref.name!r} gets both '
+                                     f'{designed[ref.name]!r} and {value!r} (front and rear '
+                                     'differ: map them to two parameters or use 2 variables)')
+                designed[ref.name] = value
+            out.append({**values, **designed})
+        return out
+
+    def _road_inputs(self, sm: ScenarioMapping, t_rel: np.ndarray) -> np.ndarray:
+        """Road elevation (FMU units) under FL, FR, RL, RR at times t_rel, (n, 4)."""
+        ri, road = sm.road, self.roads[sm.name]
+        x_rear = ri.start_rear_axle_at_m + sm.speed_kmh / 3.6 * t_rel
+        x_front = x_rear + ri.wheelbase_m
+        conv = self.conversions[sm.name]
+        cols = []
+        for c, x_axle in zip(CORNERS, (x_front, x_front, x_rear, x_rear)):
+            z, _ = road.elevation(x_axle, 0 if c[1] == 'l' else 1)
+            cols.append(conv[f'road.{c}'].to_fmu(z))
+        return np.column_stack(cols)
+
+    def _run_one(self, sm: ScenarioMapping, index: int, x: np.ndarray, values: dict,
+                 inputs: np.ndarray | None) -> np.ndarray:
+        """Outputs (n_outputs, n_steps + 1) in FMU units of one design on a fresh instance."""
+        fmi3 = self.model_description.fmiVersion == '3.0'
+        names = [ref.name for ref in sm.outputs.values()]
+        out_vr = [self.variables[n].valueReference for n in names]
+        in_vr = ([self.variables[ref.name].valueReference for ref in sm.road.inputs.values()]
+                 if inputs is not None else [])
+        t0, h, n = sm.start_time_s, sm.step_size_s, sm.n_steps
+        samples = np.empty((len(names), n + 1))
+        slave = self._slave(f'design_{index}')
+        get = slave.getFloat64 if fmi3 else slave.getReal
+        put = slave.setFloat64 if fmi3 else slave.setReal
+        t = t0
+        fatal = False
+        try:
+            try:
+                slave.instantiate()
+                for name, value in values.items():
+                    self._set(slave, name, value)
+                if fmi3:
+                    slave.enterInitializationMode(startTime=t0, stopTime=sm.stop_time_s)
+                else:
+                    slave.setupExperiment(startTime=t0, stopTime=sm.stop_time_s)
+                    slave.enterInitializationMode()
+                if inputs is not None:
+                    put(in_vr, inputs[0].tolist())
+                slave.exitInitializationMode()
+                samples[:, 0] = get(out_vr)
+                for k in range(n):
+                    t = t0 + k * h
+                    if inputs is not None:
+                        put(in_vr, inputs[k].tolist())
+                    status = slave.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+                    if fmi3 and status[1]:
+                        raise RuntimeError(f'the FMU asked to terminate at t = {t + h:.6g} s')
+                    samples[:, k + 1] = get(out_vr)
+                    if not np.all(np.isfinite(samples[:, k + 1])):
+                        bad = names[int(np.argmin(np.isfinite(samples[:, k + 1])))]
+                        raise RuntimeError(f'output {bad!r} = {samples[names.index(bad), k + 1]}'
+                                           f' at t = {t + h:.6g} s (diverged)')
+                slave.terminate()
+            except Exception as error:
+                fatal = getattr(error, 'status', None) == FMI_FATAL
+                raise
+            finally:
+                # After a fatal status FMI allows no further call on the instance (not
+                # even freeing it): it is left as it is.  Its library stays loaded.
+                if not fatal and getattr(slave, 'component', None) is not None:
+                    try:
+                        slave.freeInstance()
+                    except Exception:  # noqa: BLE001,S110 - a failed instance may not free
+                        pass
+        except Exception as error:  # noqa: BLE001 - every FMU failure names the design
+            raise FmuRunError(f'design {index} (x = {np.round(x, 6).tolist()}): the FMU '
+                              f'failed at t = {t:.6g} s: {error}') from error
+        return samples
+
+    def evaluate(self, scenario: str, designs: np.ndarray, controllers: Any = None,
+                 **_: Any) -> DesignEvaluation:
+        """Run a batch of normalised designs (m, n_vars) on the FMU, one instance each.
+
+        Returns what :func:`suspension_tuning.evaluation.evaluate` returns: f (eq. 9 or
+        10), g (eq. 11), named metrics and a ScenarioResult whose histories carry the
+        simplified models' inputs (handling: steering and slip angles).
+
+        Raises
+        ------
+        ValueError
+            A scenario the mapping does not serve, or designs that do not fit it.
+        FmuRunError
+            A design's run failed (the message names the design).
+        """
+        if scenario not in self.mapping.scenarios:
+            raise ValueError(f'scenario {scenario!r} is not served by this FMU worker; its '
+                             f'mapping serves {", ".join(self.mapping.scenarios)}')
+        if controllers is not None:
+            raise ValueError('an FMU worker takes no valve controllers')
+        sm = self.mapping.scenarios[scenario]
+        x = design_mod.validate_design(designs, int(np.shape(designs)[-1]))
+        values = self._parameter_values(sm, x)
+        t_rel = sm.step_size_s * np.arange(sm.n_steps + 1)
+        inputs = self._road_inputs(sm, t_rel) if sm.road is not None else None
+        start = time.perf_counter()
+        runs = np.stack([self._run_one(sm, i, x[i], values[i], inputs) for i in range(len(x))])
+        wall = time.perf_counter() - start
+        conv = self.conversions[scenario]
+        # Each channel contiguous per design: reductions over a strided view sum in an
+        # order that depends on the batch, and a design must give the same bits alone,
+        # in a batch or in the calibration's chunks.
+        ch = {key: np.ascontiguousarray(conv[f'outputs.{key}'].to_si(runs[:, j]))
+              for j, key in enumerate(sm.outputs)}
+        if scenario == 'ride':
+            result = self._ride(sm, x, ch, wall)
+        else:
+            result = self._handling(sm, x, ch, sm.start_time_s + t_rel, wall)
+        names, table = metric_table(result.metrics, len(x))
+        return DesignEvaluation(f=np.asarray(result.f, float), g=np.asarray(result.g, float),
+                                metric_names=names, metrics=table, result=result)
+
+    @staticmethod
+    def _wheels(ch: dict, key: str) -> np.ndarray:
+        return np.stack([ch[f'{key}_{c}'] for c in CORNERS], axis=1)
+
+    def _ride(self, sm: ScenarioMapping, x, ch, wall) -> scen.ScenarioResult:
+        fz = self._wheels(ch, 'tyre_fz')
+        f, g, met = scen.ride_objective(ch['acc_driver'], ch['acc_passenger'], fz,
+                                        sm.step_size_s, sm.settle_s, ch.get('roll'),
+                                        ch.get('roll_rate'))
+        hist = {'t_s': sm.start_time_s + sm.step_size_s * np.arange(fz.shape[-1]),
+                'acc_driver_mps2': ch['acc_driver'], 'acc_passenger_mps2': ch['acc_passenger'],
+                'tyre_fz_n': fz}
+        if 'speed' in ch:
+            met['speed_mean_mps'] = np.mean(ch['speed'], axis=-1)
+        return scen.ScenarioResult('ride', x, f, g, met, hist, wall,
+                                   sm.stop_time_s - sm.start_time_s)
+
+    def _handling(self, sm: ScenarioMapping, x, ch, t, wall) -> scen.ScenarioResult:
+        batch = len(x)
+        if sm.windows is not None:
+            t_lc = tuple(np.full(batch, v) for v in sm.windows['first_lane_change_s'])
+            t_man = tuple(np.full(batch, v) for v in sm.windows['manoeuvre_s'])
+        else:
+            track = self._track
+            x0_lc, x1_lc = track.first_lane_change_x_m
+            t_lc = tuple(scen.crossing_time(ch['x'], t, xs) for xs in (x0_lc, x1_lc))
+            t_man = tuple(scen.crossing_time(ch['x'], t, xs) for xs in (0.0, track.x_end_m))
+        f, g, met = scen.handling_objective(ch['roll'], ch['roll_rate'],
+                                            self._wheels(ch, 'tyre_fz'), t, t_lc, t_man)
+        speed = ch.get('speed', np.full((batch, t.size), sm.speed_kmh / 3.6))
+        hist = {'t_s': t, 'roll_deg': np.degrees(ch['roll']),
+                'roll_rate_deg_s': np.degrees(ch['roll_rate']),
+                'tyre_fz_n': self._wheels(ch, 'tyre_fz'), 'steer_rad': ch['steer'],
+                'slip_angle_rad': self._wheels(ch, 'slip_angle'), 'speed_mps': speed}
+        if 'x' in ch:
+            hist['x_m'] = ch['x']
+        met['speed_min_mps'] = np.min(speed, axis=-1)
+        return scen.ScenarioResult('handling', x, f, g, met, hist, wall,
+                                   sm.stop_time_s - sm.start_time_s)
+
+    def close(self) -> None:
+        """Remove the FMU's extracted files (its library stays loaded, see below)."""
+        library = getattr(self, '_library', None)
+        if library is not None:
+            # The shared library stays loaded for the process's life: an FMU that embeds
+            # an interpreter (pythonfmu's, in this very process) leaves objects behind
+            # whose later garbage collection calls into it, a crash once it is unloaded.
+            _LOADED_LIBRARIES.append(library)
+            self._library = None
+        if getattr(self, '_unzipdir', None):
+            shutil.rmtree(self._unzipdir, ignore_errors=True)
+            self._unzipdir = None
+
+    def __enter__(self) -> FmuModel:
+        """Use as a context manager: closed on exit."""
+        return self
+
+    def __exit__(self, *exc) -> None:
+        """Close the model."""
+        self.close()
+
+
+MODELS = ('builtin', 'fmu')
+
+
+def worker_model(model: str, fmu_path: str = '', fmu_mapping: str = '') -> FmuModel | None:
+    """The full model a simulation worker runs: None (built-in) or an FmuModel.
+
+    The three settings must agree, so that a worker never starts half-configured.
+
+    Raises
+    ------
+    FmuConfigError
+        An unknown model, 'fmu' without fmu_path or fmu_mapping, 'builtin' with either
+        set, or an FMU and mapping that do not fit (see :class:`FmuModel`).
+    MappingError
+        A bad mapping file.
+    """
+    if model not in MODELS:
+        raise FmuConfigError(f'model must be one of {", ".join(MODELS)}, got {model!r}')
+    if model == 'builtin':
+        given = [name for name, value in (('fmu_path', fmu_path), ('fmu_mapping', fmu_mapping))
+                 if value]
+        if given:
+            raise FmuConfigError(f'{" and ".join(given)} set but model is builtin: add '
+                                 '-p model:=fmu to run the FMU, or drop them')
+        return None
+    missing = [name for name, value in (('fmu_path', fmu_path), ('fmu_mapping', fmu_mapping))
+               if not value]
+    if missing:
+        raise FmuConfigError(f'model fmu needs {" and ".join(missing)} (-p fmu_path:=<file.fmu> '
+                             '-p fmu_mapping:=<mapping.yaml>, docs/fmu.md)')
+    return FmuModel(fmu_path, fmu_mapping)
