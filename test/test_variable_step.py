@@ -100,8 +100,9 @@ def test_variable_step_design_gives_the_same_bits_alone_and_in_a_batch():
 
 def test_variable_step_noise_in_f_is_over_100_times_the_fixed_step_noise():
     # The paper's "severe numerical noise" (section 4.1, Fig. 7): the error-controlled
-    # integrator's step grid changes with the design.  Measured on the ride: 1.2e-4
-    # against 1.7e-8 (ratio ~11 000); the target is 100.
+    # integrator's step grid changes with the design.  Measured on the ride (sett
+    # paving, tyre hop): 7.9e-4 against 4.4e-6 (ratio 179; RK4's own noise comes from
+    # the lift-off events); the target is 100.
     x = _sweep_designs()
     fixed = noise_measure(SWEEP, run_scenario('ride', x).f)['noise_rms']
     variable = noise_measure(SWEEP, run_scenario('ride', x, integrator='variable_step').f)
@@ -111,7 +112,7 @@ def test_variable_step_noise_in_f_is_over_100_times_the_fixed_step_noise():
 
 def test_simplified_ride_model_is_smoother_than_the_variable_step_full_model():
     # Fig. 8 against Fig. 7: relative noise (noise over the trend's range, invariant
-    # under the linear eq. 25 scaling).  Measured: simplified 4.9e-6 against 3.2e-2.
+    # under the linear eq. 25 scaling).  Measured: simplified 7.4e-5 against 1.3e-2.
     x = _sweep_designs()
     variable = noise_measure(SWEEP, run_scenario('ride', x, integrator='variable_step').f)
     simplified = noise_measure(SWEEP, simplified_values('ride', x, 2)[:, 0])
@@ -123,8 +124,8 @@ def test_integrator_is_selectable_through_evaluate_and_checked():
     fixed = evaluate('ride', x)
     variable = evaluate('ride', x, integrator='variable_step')
     assert fixed.result.f[0] != variable.result.f[0]  # a different integration
-    # same equations: the two agree to 1 % at the study tolerance (measured 0.5 %)
-    assert variable.f[0] == pytest.approx(fixed.f[0], rel=0.01)
+    # same equations: the two agree to 2 % at the study tolerance (measured 0.9 % on the sett paving)
+    assert variable.f[0] == pytest.approx(fixed.f[0], rel=0.02)
     with pytest.raises(ValueError, match='unknown integrator'):
         run_scenario('ride', x, integrator='euler')
     with pytest.raises(ValueError, match='rtol must be positive'):
