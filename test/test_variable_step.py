@@ -124,7 +124,7 @@ def test_integrator_is_selectable_through_evaluate_and_checked():
     fixed = evaluate('ride', x)
     variable = evaluate('ride', x, integrator='variable_step')
     assert fixed.result.f[0] != variable.result.f[0]  # a different integration
-    # same equations: the two agree to 2 % at the study tolerance (measured 0.9 % on the sett paving)
+    # same equations: they agree to 2 % at the study tolerance (measured 0.9 %, sett paving)
     assert variable.f[0] == pytest.approx(fixed.f[0], rel=0.02)
     with pytest.raises(ValueError, match='unknown integrator'):
         run_scenario('ride', x, integrator='euler')
