@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from suspension_tuning.vehicle.design import VARIABLE_NAMES, validate_design
 from suspension_tuning.vehicle.mixed import run_mixed
+from suspension_tuning.vehicle.params import load_vehicle_params, with_integrator
 from suspension_tuning.vehicle.scenarios import SCENARIOS as MODEL_SCENARIOS
 from suspension_tuning.vehicle.scenarios import ScenarioResult, run_scenario
 
@@ -114,7 +115,7 @@ def metric_table(metrics: dict[str, np.ndarray], batch: int) -> tuple[list[str],
 
 
 def evaluate(scenario: str, designs: Array, controllers: list | None = None,
-             **kwargs: Any) -> DesignEvaluation:
+             integrator: str | None = None, **kwargs: Any) -> DesignEvaluation:
     """Run the full model on a batch of designs (m, n_vars).
 
     Parameters
@@ -126,9 +127,14 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
     controllers : list of callables, optional
         Valve controllers of the 'mixed' scenario, one per design (default in-process;
         see :func:`suspension_tuning.vehicle.mixed.run_mixed`).
+    integrator : str, optional
+        'fixed_step' or 'variable_step' (default config/vehicle.yaml, fixed_step).
     **kwargs
         Passed to :func:`suspension_tuning.vehicle.scenarios.run_scenario`.
     """
+    if integrator is not None:
+        params = kwargs.get('params') or load_vehicle_params()
+        kwargs['params'] = with_integrator(params, integrator)
     if scenario == 'mixed':
         result = run_mixed(designs, controllers, **kwargs)
     else:
@@ -138,12 +144,13 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
                             metric_names=names, metrics=table, result=result)
 
 
-def in_process_model(scenario: str) -> Callable[[Array], Any]:
+def in_process_model(scenario: str, integrator: str | None = None) -> Callable[[Array], Any]:
     """The full model of ``scenario`` in-process, as ``tuning.optimise`` calls it.
 
     Returns a callable designs (m, n) -> ``tuning.FullEvaluation`` with the named
     metrics (what extra constraints bound) and the scenario result as the simplified
-    model's inputs; 'mixed' runs with in-process valve controllers.
+    model's inputs; 'mixed' runs with in-process valve controllers.  ``integrator``:
+    'fixed_step' or 'variable_step' (None or '': config/vehicle.yaml's).
     """
     from suspension_tuning.tuning import FullEvaluation
 
@@ -151,7 +158,8 @@ def in_process_model(scenario: str) -> Callable[[Array], Any]:
         raise ValueError(f'unknown scenario {scenario!r}; valid: {", ".join(scenarios())}')
 
     def run(designs: Array) -> FullEvaluation:
-        result = evaluate(scenario, np.atleast_2d(np.asarray(designs, dtype=float)))
+        result = evaluate(scenario, np.atleast_2d(np.asarray(designs, dtype=float)),
+                          integrator=integrator or None)
         return FullEvaluation(f=result.f, g=result.g, inputs=result.result,
                               metric_names=result.metric_names, metrics=result.metrics)
 

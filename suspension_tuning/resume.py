@@ -49,12 +49,14 @@ def resume(bag: str | os.PathLike[str], max_iterations: int | None = None,
         options['maxiter'] = int(max_iterations)
     request = TuningRequest(config['scenario'], int(config['n_vars']), config['x0'],
                             config['gradient_source'], options, float(config['fd_step']),
-                            config.get('constraints') or ())
+                            config.get('constraints') or (),
+                            integrator=config.get('integrator', '') if config.get(
+                                'integrator') in ('fixed_step', 'variable_step') else '')
     last = state['history'][-1]
     counter = RunCounter(full_runs=int(last['n_full_runs']),
                          simplified_runs=int(last['n_simplified_runs']))
 
-    models = {name: evaluation.in_process_model(name)
+    models = {name: evaluation.in_process_model(name, request.integrator)
               for name in (request.scenario, *request.constraint_scenarios)}
     gradients = {}
     if request.gradient_source == 'simplified':

@@ -71,13 +71,17 @@ Array = NDArray[np.float64]
 SCENARIOS = ('ride', 'handling')
 N_VARS = (2, 4)
 STARTS = ('centre', 'baseline')
-METHODS = ('dq_simplified', 'dq_full', 'slsqp', 'reference')
+METHODS = ('dq_simplified', 'dq_full', 'slsqp', 'slsqp_best_fd', 'reference')
 METHOD_LABELS = {
     'dq_simplified': 'Dynamic-Q, simplified-model gradients',
     'dq_full': 'Dynamic-Q, full-model central differences',
     'slsqp': 'SLSQP, full-model 2-point differences',
+    'slsqp_best_fd': 'SLSQP, 2-point differences with the noise-optimal step',
     'reference': 'reference optimum',
 }
+#: Integrators of the full model (config/vehicle.yaml integration): fixed-step RK4,
+#: smooth; variable-step Dormand-Prince 5(4) at Adams' default error, noisy.
+INTEGRATORS = ('fixed_step', 'variable_step')
 #: Grid points per axis of the reference search (2 and 4 variables) [E: 41 gives a
 #: 0.025 spacing, the central-difference half step; 7^4 = 2401 full runs for n = 4].
 GRID_POINTS = {2: 41, 4: 7}
@@ -86,6 +90,11 @@ QUICK_GRID_POINTS = {2: 11, 4: 3}
 #: Calibration sample counts of the simplified-gradient runs [P s.6.3.1: 30; issue 9
 #: allows fewer if the optimum holds: 16 = the 2^4 corners for n = 4].
 CALIBRATION_SAMPLES = (30, 16)
+#: Grid points per axis of the fixed-step reference in the noisy study [E]: the smooth
+#: model's optimum is found by SLSQP polishing from the methods' final designs and the
+#: noisy reference (the smooth study's polish from its methods' points reached the dense
+#: grid's optimum in every case), so a coarse grid suffices.
+FIXED_REFERENCE_GRID = {2: 5, 4: 3}
 #: Designs per full-model batch of the reference grid [E: ~2 s per ride batch].
 GRID_BATCH = 64
 #: SLSQP's finite-difference step, normalised units: SciPy's default sqrt(machine eps).
@@ -127,6 +136,10 @@ class StudyRun:
         Euclidean distance of x to the reference optimum, normalised units.
     gap_to_reference_pct : float
         100 (f - f_ref) / |f_ref|.
+    f_fixed_step, gap_to_fixed_reference_pct : float
+        Runs on the variable-step (noisy) model: f of the final design on the
+        fixed-step model (the noise-free solution of the same equations) and its gap
+        to the fixed-step reference optimum, %.
     bag : str
         Bag folder ('' when not recorded).
     details : dict
@@ -155,6 +168,8 @@ class StudyRun:
     gap_to_reference_pct: float = math.nan
     bag: str = ''
     details: dict[str, Any] = field(default_factory=dict)
+    f_fixed_step: float = math.nan
+    gap_to_fixed_reference_pct: float = math.nan
 
     @property
     def full_runs_with_calibration(self) -> int:
@@ -204,9 +219,10 @@ class FullModelCache:
         2 or 4.
     """
 
-    def __init__(self, scenario: str, n_vars: int) -> None:
+    def __init__(self, scenario: str, n_vars: int, integrator: str | None = None) -> None:
         self.scenario = scenario
         self.n_vars = n_vars
+        self.integrator = integrator
         self.values: dict[bytes, tuple[float, Array]] = {}
 
     @property
@@ -219,20 +235,25 @@ class FullModelCache:
         xv = validate_design(np.asarray(x, dtype=float), self.n_vars)[0]
         key = xv.tobytes()
         if key not in self.values:
-            result = run_scenario(self.scenario, xv[None, :], n_vars=self.n_vars)
+            result = run_scenario(
+                self.scenario, xv[None, :], n_vars=self.n_vars, integrator=self.integrator
+            )
             self.values[key] = (float(result.f[0]), np.asarray(result.g[0], float).copy())
         return self.values[key]
 
 
-def full_model(scenario: str, n_vars: int) -> Callable[[Array], FullEvaluation]:
+def full_model(
+    scenario: str, n_vars: int, integrator: str | None = None
+) -> Callable[[Array], FullEvaluation]:
     """The full model as :func:`suspension_tuning.tuning.optimise` wants it (in-process).
 
     With the named metrics (``evaluation.metric_table``), which extra constraints may
     bound; 'mixed' runs the closed-loop scenario with in-process valve controllers.
+    ``integrator``: 'fixed_step' or 'variable_step' (default config/vehicle.yaml).
     """
     from suspension_tuning.evaluation import in_process_model
 
-    run = in_process_model(scenario)
+    run = in_process_model(scenario, integrator)
 
     def evaluate(designs: Array) -> FullEvaluation:
         return run(validate_design(designs, n_vars))
@@ -299,6 +320,7 @@ def run_dynamic_q(
     x0: ArrayLike | None = None,
     constraints: Sequence[Any] = (),
     constraint_gradients: dict[str, SimplifiedGradient] | None = None,
+    integrator: str | None = None,
 ) -> tuple[StudyRun, _Recorder]:
     """Dynamic-Q through :func:`suspension_tuning.tuning.optimise` (the coordinator's loop).
 
@@ -326,11 +348,14 @@ def run_dynamic_q(
         in-process.
     constraint_gradients : dict, optional
         Simplified gradients of the constraints' other scenarios (simplified source).
+    integrator : str, optional
+        Full-model integrator ('fixed_step' or 'variable_step'; default config).
     """
     options = vehicle_options() if options is None else options
     start_x = start_point(start, n_vars) if x0 is None else validate_design(x0, n_vars)[0]
     request = TuningRequest(
-        scenario, n_vars, start_x, gradient_source, options, FD_STEP, constraints
+        scenario, n_vars, start_x, gradient_source, options, FD_STEP, constraints,
+        integrator=integrator or '',
     )
     counter = RunCounter(calibration_runs=calibration_samples)
     recorder = _Recorder(record)
@@ -342,10 +367,11 @@ def run_dynamic_q(
         return False
 
     t0 = time.perf_counter()
-    models = {name: full_model(name, n_vars) for name in request.constraint_scenarios}
+    models = {name: full_model(name, n_vars, integrator)
+              for name in request.constraint_scenarios}
     result = optimise(
-        request, full_model(scenario, n_vars), gradient, on_iteration, counter=counter,
-        constraint_models=models, constraint_gradients=constraint_gradients,
+        request, full_model(scenario, n_vars, integrator), gradient, on_iteration,
+        counter=counter, constraint_models=models, constraint_gradients=constraint_gradients,
     )
     wall = time.perf_counter() - t0
     method = 'dq_simplified' if gradient_source == 'simplified' else 'dq_full'
@@ -368,7 +394,8 @@ def run_dynamic_q(
         success=bool(result.success),
         message=str(result.message),
         history=history,
-        details={'optimiser_options': options, 'fd_step': FD_STEP},
+        details={'optimiser_options': options, 'fd_step': FD_STEP,
+                 'integrator': integrator_name(integrator)},  # fmt: skip
     )
     if request.constraints:
         run.details.update(
@@ -431,6 +458,15 @@ def _recording(model: FullModelCache, history: list[dict[str, Any]], recorder: _
     return add
 
 
+def integrator_name(integrator: str | None) -> str:
+    """The integrator a run uses: the given one or config/vehicle.yaml's default."""
+    if integrator is not None:
+        return integrator
+    from suspension_tuning.vehicle.params import load_vehicle_params
+
+    return load_vehicle_params().integrator.method
+
+
 def run_slsqp(
     scenario: str,
     n_vars: int,
@@ -438,15 +474,18 @@ def run_slsqp(
     record: bool = True,
     maxiter: int = 100,
     eps: float = SLSQP_EPS,
+    integrator: str | None = None,
+    method: str = 'slsqp',
 ) -> tuple[StudyRun, _Recorder]:
-    """SciPy SLSQP with its default finite differences on the full model.
+    """SciPy SLSQP with its finite differences on the full model.
 
     ``jac=None``: SciPy's 2-point forward differences with the absolute step ``eps``
     (default SciPy's sqrt(machine eps) = 1.49e-8, normalised units), n full runs per
     gradient; the objective and the constraints at one x share one full run
-    (:class:`FullModelCache`).
+    (:class:`FullModelCache`).  ``method`` names the row ('slsqp' or
+    'slsqp_best_fd').
     """
-    model = FullModelCache(scenario, n_vars)
+    model = FullModelCache(scenario, n_vars, integrator)
     recorder = _Recorder(record)
     history: list[dict[str, Any]] = []
     x0 = start_point(start, n_vars)
@@ -462,7 +501,7 @@ def run_slsqp(
         scenario=scenario,
         n_vars=n_vars,
         start=start,
-        method='slsqp',
+        method=method,
         calibration_samples=0,
         x=np.asarray(result.x, float).tolist(),
         f=f,
@@ -481,6 +520,7 @@ def run_slsqp(
             'eps': float(eps),
             'maxiter': maxiter,
             'ftol': 1e-6,
+            'integrator': integrator_name(integrator),
         },
     )
     return run, recorder
@@ -502,6 +542,8 @@ def reference_optimum(
     extra_starts: Sequence[ArrayLike] = (),
     gtol: float = 1e-3,
     record: bool = True,
+    integrator: str | None = None,
+    polish_eps: float = SLSQP_EPS,
 ) -> tuple[StudyRun, _Recorder]:
     """Reference optimum: full-factorial grid, then SLSQP polish; the best feasible point seen.
 
@@ -518,6 +560,11 @@ def reference_optimum(
         Feasible when max g <= gtol (config/optimiser.yaml vehicle gtol).
     record : bool
         Collect IterationRecord messages (grid best, then each improvement) for a bag.
+    integrator : str, optional
+        Full-model integrator (default config).
+    polish_eps : float
+        SLSQP's finite-difference step of the polish (a noisy model needs the
+        noise-optimal step of :func:`noise_optimal_fd_step`).
 
     Returns
     -------
@@ -529,7 +576,9 @@ def reference_optimum(
     grid = grid_designs(n_vars, points)
     f_grid, g_grid = [], []
     for k in range(0, len(grid), GRID_BATCH):
-        res = run_scenario(scenario, grid[k : k + GRID_BATCH], n_vars=n_vars)
+        res = run_scenario(
+            scenario, grid[k : k + GRID_BATCH], n_vars=n_vars, integrator=integrator
+        )
         f_grid.append(np.asarray(res.f, float))
         g_grid.append(np.asarray(res.g, float))
     f_grid, g_grid = np.concatenate(f_grid), np.vstack(g_grid)
@@ -537,7 +586,7 @@ def reference_optimum(
     if not feasible.any():
         raise ValueError(f'{scenario}, {n_vars} variables: no feasible grid point')
     order = np.argsort(np.where(feasible, f_grid, np.inf))
-    model = FullModelCache(scenario, n_vars)
+    model = FullModelCache(scenario, n_vars, integrator)
     for x, f, g in zip(grid, f_grid, g_grid):  # the grid's runs, counted once
         model.values[validate_design(x, n_vars)[0].tobytes()] = (float(f), g.copy())
     best_x, best_f = grid[order[0]].copy(), float(f_grid[order[0]])
@@ -557,7 +606,7 @@ def reference_optimum(
         if max_violation(g0) <= gtol and f0 < best_f:
             best_x, best_f = np.asarray(x0, float).copy(), f0
             add(best_x)
-        res = _slsqp(model, np.asarray(x0, float))
+        res = _slsqp(model, np.asarray(x0, float), eps=polish_eps)
         f, g = model(res.x)
         ok = max_violation(g) <= gtol
         polished[origin].append(f if ok else math.inf)
@@ -594,6 +643,8 @@ def reference_optimum(
             'polished_from_grid_best_f': min(polished['grid'], default=math.inf),
             'polished_from_methods_best_f': min(polished['method'], default=math.inf),
             'gtol': gtol,
+            'polish_eps': float(polish_eps),
+            'integrator': integrator_name(integrator),
         },
     )
     return run, recorder
@@ -609,6 +660,7 @@ def run_config(run: StudyRun) -> dict[str, Any]:
         'start': run.start,
         'method': run.method,
         'method_label': METHOD_LABELS[run.method],
+        'integrator': run.details.get('integrator', integrator_name(None)),
         'gradient_source': {'dq_simplified': 'simplified', 'dq_full': 'full'}.get(
             run.method, 'full'
         ),
@@ -694,8 +746,19 @@ def run_case(
     bags_dir: Path | None = None,
     log: Callable[[str], None] = print,
     slsqp_eps: float = SLSQP_EPS,
+    integrator: str | None = None,
+    best_fd_step: float | None = None,
+    fixed_reference: bool = False,
 ) -> dict[str, Any]:
     """All methods on one scenario and number of variables, from every start point.
+
+    With ``best_fd_step`` SLSQP also runs with that forward-difference step
+    ('slsqp_best_fd', see :func:`noise_optimal_fd_step`), and the reference's polish
+    uses it.  With ``fixed_reference`` (runs on the variable-step model) the reference
+    optimum of the fixed-step model is found too (a :data:`FIXED_REFERENCE_GRID`
+    grid, polished from its best points and every method's final design, the noisy
+    reference's included) and every final design is run on the fixed-step model and
+    compared with it.
 
     Returns
     -------
@@ -708,7 +771,10 @@ def run_case(
     runs: list[tuple[StudyRun, _Recorder]] = []
     for samples in calibration_samples:
         t0 = time.perf_counter()
-        scaling = calibrate(scenario, n_vars, n_samples=samples)
+        scaling = calibrate(
+            scenario, n_vars, n_samples=samples,
+            run_full=lambda sc, x: run_scenario(sc, x, integrator=integrator),
+        )  # fmt: skip
         cal_wall = time.perf_counter() - t0
         gradient = SimplifiedGradient(scenario, n_vars, scaling, FD_STEP)
         for start in starts:
@@ -722,12 +788,24 @@ def run_case(
                     samples,
                     cal_wall,
                     record=record,
+                    integrator=integrator,
                 )
             )
     for start in starts:
-        runs.append(run_dynamic_q(scenario, n_vars, start, 'full', record=record))
+        runs.append(
+            run_dynamic_q(scenario, n_vars, start, 'full', record=record, integrator=integrator)
+        )
     for start in starts:
-        runs.append(run_slsqp(scenario, n_vars, start, record=record, eps=slsqp_eps))
+        runs.append(
+            run_slsqp(scenario, n_vars, start, record=record, eps=slsqp_eps,
+                      integrator=integrator)
+        )  # fmt: skip
+    if best_fd_step is not None:
+        for start in starts:
+            runs.append(
+                run_slsqp(scenario, n_vars, start, record=record, eps=best_fd_step,
+                          integrator=integrator, method='slsqp_best_fd')
+            )  # fmt: skip
     for run, _ in runs:
         log(
             f'  {run.name}: f = {run.f:.6f}, {run.iterations} iterations, '
@@ -735,8 +813,10 @@ def run_case(
             f'{run.wall_time_s:.1f} s'
         )
     reference, ref_recorder = reference_optimum(
-        scenario, n_vars, grid_points, [r.x for r, _ in runs], record=record
-    )
+        scenario, n_vars, grid_points, [r.x for r, _ in runs], record=record,
+        integrator=integrator,
+        polish_eps=slsqp_eps if best_fd_step is None else best_fd_step,
+    )  # fmt: skip
     log(
         f'  {scenario}_{n_vars}var reference: f = {reference.f:.6f} '
         f'({reference.message}, {reference.n_full_runs} full runs, '
@@ -744,17 +824,135 @@ def run_case(
     )
     runs.append((reference, ref_recorder))
     compare_to_reference([r for r, _ in runs], reference)
+    fixed_ref = None
+    if fixed_reference:
+        finals = np.array([r.x for r, _ in runs])
+        fixed_ref, _ = reference_optimum(
+            scenario, n_vars, min(grid_points, FIXED_REFERENCE_GRID[n_vars]), finals,
+            record=False, integrator='fixed_step',
+        )  # fmt: skip
+        log(f'  {scenario}_{n_vars}var fixed-step reference: f = {fixed_ref.f:.6f} '
+            f'({fixed_ref.n_full_runs} full runs, {fixed_ref.wall_time_s:.1f} s)')
+        fixed = run_scenario(scenario, finals, n_vars=n_vars, integrator='fixed_step')
+        for (run, _), f in zip(runs, fixed.f):
+            run.f_fixed_step = float(f)
+            run.gap_to_fixed_reference_pct = (
+                100.0 * (float(f) - fixed_ref.f) / abs(fixed_ref.f)
+            )
     if bags_dir is not None:
         for run, recorder in runs:
             run.bag = str(write_bag(bags_dir / run.name, run, recorder))
     x_base = start_point('baseline', n_vars)
-    base = run_scenario(scenario, x_base[None, :], n_vars=n_vars)
+    base = run_scenario(scenario, x_base[None, :], n_vars=n_vars, integrator=integrator)
     return {
         'runs': [r for r, _ in runs],
         'reference': reference,
+        'fixed_reference': fixed_ref,
         'baseline_f': float(base.f[0]),
         'baseline_x': x_base.tolist(),
+        'integrator': integrator_name(integrator),
+        'best_fd_step': best_fd_step,
     }
+
+
+def forward_difference_step(noise: float, curvature: float, largest: float = 0.1) -> float:
+    """More & Wild's noise-optimal forward-difference step ``8^(1/4) sqrt(noise/|f''|)``.
+
+    Minimises the bound |f''| h / 2 + 2 noise / h of a forward difference's error
+    (noise = standard deviation of f's noise, curvature = f'').  Without noise the step
+    is 0 (any small step does); without curvature it is ``largest``.
+    """
+    if noise <= 0.0:
+        return 0.0
+    if curvature == 0.0:
+        return largest
+    return float(min(largest, 8.0**0.25 * math.sqrt(noise / abs(curvature))))
+
+
+def noise_optimal_fd_step(
+    scenario: str,
+    n_vars: int,
+    integrator: str | None = 'variable_step',
+    n_points: int = 41,
+    half_width: float = 0.1,
+) -> dict[str, Any]:
+    """Forward-difference step that balances truncation and noise (More & Wild 2012).
+
+    For f with noise of standard deviation eps_f and second derivative mu, the error
+    of a forward difference with step h is about |mu| h / 2 + 2 eps_f / h, least at
+    ``h* = 8^(1/4) sqrt(eps_f / |mu|)`` (More & Wild, "Estimating derivatives of noisy
+    simulations", ACM TOMS 38(3), 2012, eq. 2.3 with their constant).  Each variable
+    is swept through the centre of the design space (``n_points`` designs over
+    centre +- ``half_width``, one batch per variable); eps_f is the third-difference
+    noise estimate (:func:`suspension_tuning.studies.noise.noise_measure`) and mu the
+    curvature of a quadratic fitted to the sweep.  SLSQP takes one step for every
+    variable: the median of the per-variable steps, clipped to [1e-4, 0.1].
+
+    Returns
+    -------
+    dict
+        'step', 'per_variable' (list), 'noise' (list of eps_f), 'curvature' (list of
+        mu), 'full_runs' (n_vars * n_points, spent on finding the step).
+    """
+    from suspension_tuning.studies.noise import noise_measure
+
+    c = centre(n_vars)
+    xs = np.linspace(c[0] - half_width, c[0] + half_width, n_points)
+    steps, noises, curvatures = [], [], []
+    for k in range(n_vars):
+        x = np.tile(c, (n_points, 1))
+        x[:, k] = xs
+        f = np.asarray(run_scenario(scenario, x, n_vars=n_vars, integrator=integrator).f)
+        eps_f = noise_measure(xs, f)['noise_rms']
+        mu = 2.0 * np.polyfit(xs, f, 2)[0]
+        noises.append(float(eps_f))
+        curvatures.append(float(mu))
+        steps.append(forward_difference_step(eps_f, mu))
+    step = float(np.clip(np.median(steps), 1e-4, 0.1))
+    return {'step': step, 'per_variable': steps, 'noise': noises, 'curvature': curvatures,
+            'full_runs': n_vars * n_points}  # fmt: skip
+
+
+def noisy_ratios(case: dict[str, Any], calibration_samples: int,
+                 max_gap_pct: float = 1.0) -> dict[str, Any]:
+    """The noisy-model headline: the best SLSQP variant within ``max_gap_pct`` of the
+    reference against simplified-gradient Dynamic-Q (totals over the start points).
+
+    Gaps are to the reference optimum of the same (variable-step) model.  The best
+    SLSQP variant is the cheaper of 'slsqp' and 'slsqp_best_fd' among those whose
+    every start ends within ``max_gap_pct``; if neither does, the one with the
+    smaller worst gap (``slsqp_within_gap`` False).
+    """  # noqa: D205
+    runs = case['runs']
+    simp = [r for r in runs
+            if r.method == 'dq_simplified' and r.calibration_samples == calibration_samples]
+    n_simp = sum(r.n_full_runs for r in simp)
+    variants = {}
+    for m in ('slsqp', 'slsqp_best_fd'):
+        rs = [r for r in runs if r.method == m]
+        if rs:
+            variants[m] = (sum(r.n_full_runs for r in rs),
+                           max(r.gap_to_reference_pct for r in rs))
+    within = {m: v for m, v in variants.items() if v[1] <= max_gap_pct}
+    if within:
+        best = min(within, key=lambda m: within[m][0])
+    else:
+        best = min(variants, key=lambda m: variants[m][1])
+    n_best = variants[best][0]
+    return {
+        'best_slsqp_variant': best,
+        'slsqp_within_gap': bool(within),
+        'best_slsqp_full_runs': n_best,
+        'best_slsqp_gap_pct': variants[best][1],
+        'dq_simplified_full_runs': n_simp,
+        'full_runs_ratio_vs_slsqp_noisy': n_best / n_simp,
+        'full_runs_ratio_vs_slsqp_noisy_with_calibration': n_best / (
+            n_simp + len(simp) * calibration_samples),
+        'optimum_gap_pct_noisy': max(r.gap_to_reference_pct for r in simp),
+        'optimum_gap_to_fixed_reference_pct_noisy': max(
+            r.gap_to_fixed_reference_pct for r in simp),
+        'slsqp_default_gap_pct_noisy': variants.get('slsqp', (0, math.nan))[1],
+    }  # fmt: skip
 
 
 def cost_ratios(case: dict[str, Any], calibration_samples: int) -> dict[str, float]:
@@ -915,7 +1113,7 @@ def plot_case(case: dict[str, Any], start: str, path: Path) -> Path:
 
     ref = case['reference']
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True)
-    styles = {'dq_simplified': '-o', 'dq_full': '-s', 'slsqp': '-^'}
+    styles = {'dq_simplified': '-o', 'dq_full': '-s', 'slsqp': '-^', 'slsqp_best_fd': '-v'}
     for ax, with_cal in zip(axes, (False, True)):
         for r in case['runs']:
             if r.start != start or r.method not in styles:
@@ -950,8 +1148,14 @@ def run_study(
     bags: bool = True,
     log: Callable[[str], None] = print,
     slsqp_eps: float = SLSQP_EPS,
+    integrator: str | None = None,
 ) -> dict[str, Any]:
     """Run every case, write the tables, plots, JSON and bags under ``out``.
+
+    With ``integrator='variable_step'`` the study runs on the noisy variable-step full
+    model: SLSQP also with the noise-optimal step (:func:`noise_optimal_fd_step`), the
+    reference optimum on both models, and the outputs ``method_study_noisy.md``,
+    ``results_noisy.json``, ``plots/noisy_*.png`` and ``bags/noisy_*``.
 
     Returns
     -------
@@ -974,28 +1178,43 @@ def run_study(
     t0 = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    noisy = integrator == 'variable_step'
+    tag = 'noisy_' if noisy else ''
     for s in scenarios:  # numba compile / cache load outside every timed run
-        run_scenario(s, centre(2)[None, :], n_vars=2)
+        for integ in ('fixed_step', integrator):
+            run_scenario(s, centre(2)[None, :], n_vars=2, integrator=integ)
     cases, plots = [], []
     for scenario in scenarios:
         for n in n_vars_list:
-            log(f'== {scenario}, {n} variables')
+            log(f'== {scenario}, {n} variables' + (' (variable-step model)' if noisy else ''))
+            step = noise_optimal_fd_step(scenario, n, integrator) if noisy else None
+            if step is not None:
+                log(f'  noise-optimal forward-difference step {step["step"]:.4f} '
+                    f'({step["full_runs"]} full runs)')
             case = run_case(
                 scenario,
                 n,
                 starts,
                 calibration_samples,
                 grid_points[n],
-                out / 'bags' if bags else None,
+                (out / 'bags' / 'noisy' if noisy else out / 'bags') if bags else None,
                 log,
                 slsqp_eps,
+                integrator=integrator,
+                best_fd_step=None if step is None else step['step'],
+                fixed_reference=noisy,
             )
+            case['fd_step_search'] = step
             cases.append(case)
             for start in starts:
                 plots.append(
-                    plot_case(case, start, out / 'plots' / f'{scenario}_{n}var_{start}.png')
-                )
+                    plot_case(case, start,
+                              out / 'plots' / f'{tag}{scenario}_{n}var_{start}.png')
+                )  # fmt: skip
     wall = time.perf_counter() - t0
+    if noisy:
+        return _write_noisy(out, cases, calibration_samples, grid_points, n_vars_list,
+                            slsqp_eps, wall, plots)  # fmt: skip
     text = (
         f'# Method study: simplified-model gradients against full-model gradients\n\n'
         f'Generated by `study` in {wall:.0f} s.  Dynamic-Q: config/optimiser.yaml '
@@ -1007,21 +1226,102 @@ def run_study(
         f'100 (f - f_ref) / |f_ref|.\n\n' + markdown_tables(cases, calibration_samples)
     )
     (out / 'method_study.md').write_text(text)
-    payload = {
-        'wall_time_s': wall,
-        'cases': [
-            {
-                'scenario': c['reference'].scenario,
-                'n_vars': c['reference'].n_vars,
-                'baseline_f': c['baseline_f'],
-                'baseline_x': c['baseline_x'],
-                'ratios': {str(s): cost_ratios(c, s) for s in calibration_samples},
-                'runs': [{**asdict(r), 'name': r.name} for r in c['runs']],
-            }
-            for c in cases
-        ],
-    }
-    (out / 'results.json').write_text(json.dumps(payload, indent=1, default=float))
+    _write_results(out / 'results.json', cases, wall, lambda c: {
+        'baseline_x': c['baseline_x'],
+        'ratios': {str(s): cost_ratios(c, s) for s in calibration_samples}})
+    return {'cases': cases, 'markdown': text, 'plots': plots, 'wall_time_s': wall}
+
+
+def _write_results(path: Path, cases: Sequence[dict[str, Any]], wall: float,
+                   extra: Callable[[dict[str, Any]], dict[str, Any]]) -> None:
+    """Every case's runs (and ``extra(case)``) as JSON."""
+    payload = {'wall_time_s': wall, 'cases': [
+        {'scenario': c['reference'].scenario, 'n_vars': c['reference'].n_vars,
+         'baseline_f': c['baseline_f'], **extra(c),
+         'runs': [{**asdict(r), 'name': r.name} for r in c['runs']]}
+        for c in cases]}  # fmt: skip
+    path.write_text(json.dumps(payload, indent=1, default=float))
+
+
+def noisy_markdown(cases: Sequence[dict[str, Any]], calibration_samples: Sequence[int]) -> str:
+    """Tables of the study on the variable-step (noisy) model."""
+    lines = [
+        '| scenario | n | start | method | cal. N | FD step | f (noisy) | gap to noisy ref. % '
+        '| f on fixed-step | gap to fixed-step ref. % | max viol. | iter. | full runs '
+        '| calib. runs | message |',
+        '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|',
+    ]
+    for case in cases:
+        for r in case['runs']:
+            cal = str(r.calibration_samples) if r.method == 'dq_simplified' else '-'
+            step = {'dq_simplified': FD_STEP, 'dq_full': FD_STEP}.get(
+                r.method, r.details.get('eps', r.details.get('polish_eps', math.nan))
+            )
+            iters = '-' if r.method == 'reference' else str(r.iterations)
+            lines.append(
+                f'| {r.scenario} | {r.n_vars} | {r.start} | {r.method} | {cal} | {step:.3g} | '
+                f'{r.f:.5f} | {r.gap_to_reference_pct:+.3f} | {r.f_fixed_step:.5f} | '
+                f'{r.gap_to_fixed_reference_pct:+.3f} | {r.max_violation:.3g} | {iters} | '
+                f'{r.n_full_runs} | {r.n_calibration_runs} | {r.message[:40]} |'
+            )
+    lines += [
+        '',
+        '**Full-model runs of the best SLSQP variant within 1 % of the noisy reference over '
+        "those of simplified-gradient Dynamic-Q** (totals over both starts; the step "
+        "search's runs are not counted)",
+        '',
+        '| scenario | n | cal. N | best SLSQP variant | within 1 % | its runs | DQ simpl. runs '
+        '| ratio | ratio incl. calib. | DQ simpl. gap % (noisy ref.) '
+        '| DQ simpl. gap % (fixed-step ref.) | SLSQP default gap % |',
+        '|---|---|---|---|---|---|---|---|---|---|---|---|',
+    ]
+    for case in cases:
+        ref = case['reference']
+        for samples in calibration_samples:
+            c = noisy_ratios(case, samples)
+            lines.append(
+                f'| {ref.scenario} | {ref.n_vars} | {samples} | {c["best_slsqp_variant"]} | '
+                f'{"yes" if c["slsqp_within_gap"] else "no"} | {c["best_slsqp_full_runs"]} | '
+                f'{c["dq_simplified_full_runs"]} | {c["full_runs_ratio_vs_slsqp_noisy"]:.2f} | '
+                f'{c["full_runs_ratio_vs_slsqp_noisy_with_calibration"]:.2f} | '
+                f'{c["optimum_gap_pct_noisy"]:+.3f} | '
+                f'{c["optimum_gap_to_fixed_reference_pct_noisy"]:+.3f} | '
+                f'{c["slsqp_default_gap_pct_noisy"]:+.3f} |'
+            )
+    lines += ['', '**Reference optima and the forward-difference step**', '']
+    for case in cases:
+        ref, fref, st = case['reference'], case['fixed_reference'], case['fd_step_search']
+        lines.append(
+            f'- {ref.scenario}, n = {ref.n_vars}: noisy model f = {ref.f:.5f} at x = '
+            f'{np.round(ref.x, 3).tolist()} ({ref.n_full_runs} full runs); fixed-step '
+            f'model f = {fref.f:.5f} at x = {np.round(fref.x, 3).tolist()} '
+            f'({fref.n_full_runs} full runs).  Forward-difference step: noise '
+            f'{np.round(st["noise"], 6).tolist()}, curvature '
+            f'{np.round(st["curvature"], 4).tolist()}, per-variable h* '
+            f'{np.round(st["per_variable"], 4).tolist()} -> {st["step"]:.4f} '
+            f'({st["full_runs"]} full runs).'
+        )
+    return '\n'.join(lines) + '\n'
+
+
+def _write_noisy(out: Path, cases: list, calibration_samples: Sequence[int],
+                 grid_points: dict[int, int], n_vars_list: Sequence[int], slsqp_eps: float,
+                 wall: float, plots: list) -> dict[str, Any]:  # fmt: skip
+    text = (
+        '# Method study on the variable-step (noisy) full model\n\n'
+        f'Generated by `study --integrator variable_step` in {wall:.0f} s.  Full model: '
+        'Dormand-Prince 5(4), config/vehicle.yaml integration.variable_step.  '
+        f'Dynamic-Q: config/optimiser.yaml `vehicle`, half step {FD_STEP}; SLSQP: maxiter '
+        f'100, ftol 1e-6, forward differences with {slsqp_eps:.3g} (slsqp) and the '
+        'noise-optimal step (slsqp_best_fd); reference grids '
+        f'{", ".join(f"{grid_points[n]}^{n}" for n in n_vars_list)} then SLSQP polish, '
+        'on each model.\n\n' + noisy_markdown(cases, calibration_samples)
+    )
+    (out / 'method_study_noisy.md').write_text(text)
+    _write_results(out / 'results_noisy.json', cases, wall, lambda c: {
+        'fd_step_search': c['fd_step_search'],
+        'fixed_reference': asdict(c['fixed_reference']),
+        'ratios': {str(s): noisy_ratios(c, s) for s in calibration_samples}})
     return {'cases': cases, 'markdown': text, 'plots': plots, 'wall_time_s': wall}
 
 
@@ -1083,6 +1383,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         '--pareto-samples', type=int, default=30,
         help='eq. 25 calibration samples per scenario of the Pareto study (default 30)',
     )
+    parser.add_argument(
+        '--integrator',
+        choices=INTEGRATORS,
+        default=None,
+        help='full-model integrator (default config/vehicle.yaml: fixed_step); '
+        'variable_step runs the study on the noisy model',
+    )
     args = parser.parse_args(argv)
     if args.pareto:
         from suspension_tuning.studies import pareto
@@ -1110,6 +1417,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             bags=not args.no_bags,
             log=lambda s: print(s, flush=True),
             slsqp_eps=args.slsqp_eps,
+            integrator=args.integrator,
         )
     except ValueError as error:
         print(f'study: {error}', file=sys.stderr)
@@ -1117,8 +1425,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     print()
     print(study['markdown'])
     out = Path(args.out)
-    print(f'table: {out / "method_study.md"}')
-    print(f'results: {out / "results.json"}')
+    noisy = '_noisy' if args.integrator == 'variable_step' else ''
+    print(f'table: {out / f"method_study{noisy}.md"}')
+    print(f'results: {out / f"results{noisy}.json"}')
     print(f'plots: {", ".join(str(p) for p in study["plots"])}')
     if not args.no_bags:
         print(f'bags: {out / "bags"} (inspect: inspect_bag <bag>)')

@@ -48,6 +48,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                         help="extra constraint '<scenario>:<quantity><=<bound>', e.g. "
                         "'handling:f_hand<=0.8' or 'handling:roll_first_peak_deg<=4' "
                         '(repeatable)')
+    parser.add_argument('--integrator', default='',
+                        help="full model: 'fixed_step' or 'variable_step' (default: the "
+                             "simulation's, config/vehicle.yaml)")
     parser.add_argument('--action', default='/coordinator/optimise', help='action name')
     parser.add_argument('--server-timeout', type=float, default=30.0,
                         help='seconds to wait for the coordinator')
@@ -151,7 +154,8 @@ def main(argv: list[str] | None = None) -> int:
                              max_iterations=args.max_iterations, move_limit=args.move_limit,
                              constraints=[Constraint(scenario=c.scenario, quantity=c.quantity,
                                                      upper_bound=c.upper_bound)
-                                          for c in constraints])
+                                          for c in constraints],
+                             integrator=args.integrator)
         sending = client.send_goal_async(
             goal, feedback_callback=lambda fb: print(format_feedback(fb.feedback),
                                                      flush=True))

@@ -42,6 +42,7 @@ from suspension_tuning.vehicle.design import (
     to_physical,
     validate_design,
 )
+from suspension_tuning.vehicle.params import INTEGRATORS
 
 Array = NDArray[np.float64]
 
@@ -255,6 +256,9 @@ class TuningRequest:
     constraints : sequence, optional
         Extra inequality constraints (:class:`ConstraintSpec`, or anything
         :meth:`ConstraintSpec.coerce` reads), after the eq. 11 constraints in g.
+    integrator : str
+        Full-model integrator: 'fixed_step', 'variable_step' or '' (the simulation's
+        default, config/vehicle.yaml).
     """
 
     scenario: str
@@ -264,6 +268,7 @@ class TuningRequest:
     options: Mapping[str, Any] | None = None
     fd_step: float = 0.025
     constraints: Sequence[Any] = ()
+    integrator: str = ''
     start: Array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -276,6 +281,9 @@ class TuningRequest:
         if self.gradient_source not in GRADIENT_SOURCES:
             raise ValueError(f'unknown gradient source {self.gradient_source!r}; '
                              f'valid: {", ".join(GRADIENT_SOURCES)}')
+        if self.integrator not in ('', *INTEGRATORS):
+            raise ValueError(f'unknown integrator {self.integrator!r}; '
+                             f'valid: {", ".join(INTEGRATORS)} or empty (default)')
         if not (np.isfinite(self.fd_step) and 0.0 < self.fd_step <= 0.25):
             raise ValueError(f'fd_step must lie in (0, 0.25], got {self.fd_step}')
         x0 = centre(self.n_vars) if self.x0 is None or len(self.x0) == 0 else self.x0

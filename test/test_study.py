@@ -174,6 +174,54 @@ def test_cli_rejects_an_unknown_scenario(capsys):
     assert 'invalid choice' in capsys.readouterr().err
 
 
+def test_forward_difference_step_balances_truncation_and_noise():
+    from suspension_tuning.study import forward_difference_step
+
+    # More & Wild: h* = 8^(1/4) sqrt(eps / |f''|); eps = 1e-4, f'' = 2 (f = x^2):
+    # 1.6818 * sqrt(5e-5) = 0.011892
+    assert forward_difference_step(1e-4, 2.0) == pytest.approx(0.011892, rel=1e-4)
+    assert forward_difference_step(1e-4, -2.0) == forward_difference_step(1e-4, 2.0)
+    # the error bound |f''| h / 2 + 2 eps / h is smaller at h* than at h*/2 and at 2 h*
+    h = forward_difference_step(1e-4, 2.0)
+    bound = [2.0 * k * h / 2 + 2e-4 / (k * h) for k in (0.5, 1.0, 2.0)]
+    assert bound[1] < bound[0] and bound[1] < bound[2]
+    assert forward_difference_step(0.0, 2.0) == 0.0  # no noise: any small step
+    assert forward_difference_step(1e-4, 0.0) == 0.1  # no curvature: the largest step
+
+
+def test_noisy_ratios_pick_the_cheapest_slsqp_variant_within_one_percent():
+    from suspension_tuning.study import StudyRun, noisy_ratios
+
+    def run(method, start, runs, gap, cal=0):
+        r = StudyRun('ride', 4, start, method, cal, [0.5] * 4, -0.15, [-1.0] * 4, 0.0, 5,
+                     runs, 0, cal, 1.0)
+        r.gap_to_reference_pct, r.gap_to_fixed_reference_pct = gap, gap + 0.1
+        return r
+
+    case = {'runs': [run('dq_simplified', 'centre', 7, 0.2, 16),
+                     run('dq_simplified', 'baseline', 9, 0.3, 16),
+                     run('slsqp', 'centre', 40, 6.0), run('slsqp', 'baseline', 50, 5.0),
+                     run('slsqp_best_fd', 'centre', 60, 0.5),
+                     run('slsqp_best_fd', 'baseline', 70, 0.9)]}
+    c = noisy_ratios(case, 16)
+    # default SLSQP is cheaper but 6 % off: the noise-optimal variant is the one within 1 %
+    assert c['best_slsqp_variant'] == 'slsqp_best_fd' and c['slsqp_within_gap']
+    assert c['full_runs_ratio_vs_slsqp_noisy'] == pytest.approx(130 / 16)
+    assert c['full_runs_ratio_vs_slsqp_noisy_with_calibration'] == pytest.approx(130 / 48)
+    assert c['optimum_gap_pct_noisy'] == pytest.approx(0.3)
+    assert c['slsqp_default_gap_pct_noisy'] == pytest.approx(6.0)
+
+
+def test_study_run_configuration_names_the_integrator():
+    from suspension_tuning.study import StudyRun, run_config
+
+    run = StudyRun('ride', 2, 'centre', 'slsqp', 0, [0.5, 0.5], -0.15, [-1.0] * 4, 0.0, 3,
+                   20, 0, 0, 1.0, details={'integrator': 'variable_step', 'eps': 0.07})
+    config = run_config(run)
+    assert config['integrator'] == 'variable_step'  # what the bag's run_config records
+    assert config['method'] == 'slsqp' and config['eps'] == 0.07
+
+
 def test_active_constraints_are_those_within_the_tolerance_of_zero():
     # ACTIVE_G_TOL = 0.05: g = -0.05 (9.5 % of the time off the ground) counts, -0.06 not
     assert active_constraints([-0.06, -0.05, 0.0, 0.3]) == ['FR', 'RL', 'RR']

@@ -182,3 +182,12 @@ def test_a_constraint_scenario_without_a_model_is_an_error():
     request = TuningRequest('ride', 2, gradient_source='full', constraints=['mixed:f<=1'])
     with pytest.raises(ValueError, match='needs its full model'):
         optimise(request, unconstrained_model)
+
+
+def test_tuning_request_names_the_integrator_and_rejects_unknown_ones():
+    from suspension_tuning.tuning import TuningRequest
+
+    assert TuningRequest('ride', 2).integrator == ''  # the simulation's default
+    assert TuningRequest('ride', 2, integrator='variable_step').integrator == 'variable_step'
+    with pytest.raises(ValueError, match='unknown integrator'):
+        TuningRequest('ride', 2, integrator='rk45')

@@ -176,9 +176,11 @@ class SimulationPool:
         self.calls = 0
 
     def evaluate(self, scenario: str, n_vars: int, designs: np.ndarray,
-                 return_inputs: bool = False, publish_telemetry: bool = False
-                 ) -> list[EvaluateDesign.Response]:
+                 return_inputs: bool = False, publish_telemetry: bool = False,
+                 integrator: str = '') -> list[EvaluateDesign.Response]:
         """Evaluate designs (m, n_vars); return the chunk responses in design order.
+
+        ``integrator``: the full-model integrator ('' = each worker's parameter).
 
         Raises
         ------
@@ -202,7 +204,7 @@ class SimulationPool:
                     scenario=scenario, n_vars=n_vars,
                     designs=designs[chunk].ravel().tolist(),
                     publish_telemetry=publish_telemetry and index == 0,
-                    return_inputs=return_inputs)))
+                    return_inputs=return_inputs, integrator=integrator)))
             self.calls += len(sent)
             outcomes = call_many(self.node, [(self.clients[worker], request)
                                              for _, worker, request in sent],

@@ -191,7 +191,8 @@ class CoordinatorNode(Node):
         constraints = [(c.scenario, c.quantity, c.upper_bound) for c in goal.constraints]
         return TuningRequest(goal.scenario, int(goal.n_vars), list(goal.x0) or None,
                              goal.gradient_source or 'simplified', options,
-                             float(self.get_parameter('fd_step').value), constraints)
+                             float(self.get_parameter('fd_step').value), constraints,
+                             integrator=goal.integrator)
 
     def _publish_run_config(self, request: TuningRequest) -> None:
         config = {
@@ -200,6 +201,7 @@ class CoordinatorNode(Node):
             'optimiser_options': request.options, 'fd_step': request.fd_step,
             'constraints': [c.as_dict() for c in request.constraints],
             'constraint_gradient_sources': request.constraint_gradient_sources(),
+            'integrator': request.integrator or 'simulation default',
             'coordinator_parameters': {name: p.value for name, p in
                                        self.get_parameters_by_prefix('').items()},
             'simulation_models': self._worker_models(),
@@ -225,7 +227,8 @@ class CoordinatorNode(Node):
             responses = self.pool.evaluate(
                 scenario, request.n_vars, designs,
                 return_inputs=(request.gradient_source == 'simplified' and len(designs) == 1
-                               and scenario == 'handling'))
+                               and scenario == 'handling'),
+                integrator=request.integrator)
             f = np.concatenate([np.asarray(r.f, float) for r in responses])
             g = np.concatenate([np.asarray(r.g, float).reshape(r.n_designs, r.n_constraints)
                                 for r in responses])
@@ -269,7 +272,8 @@ class CoordinatorNode(Node):
         try:
             response = call(self, self.calibrate_client, Calibrate.Request(
                 scenario=scenario, n_vars=request.n_vars,
-                n_samples=int(self.get_parameter('calibration_samples').value), force=False),
+                n_samples=int(self.get_parameter('calibration_samples').value), force=False,
+                integrator=request.integrator),
                 self.timeout_s * 2, self._stopped)
         finally:
             self._calibrating = None
@@ -349,7 +353,7 @@ class CoordinatorNode(Node):
         if self.get_parameter('final_telemetry').value and not goal_handle.is_cancel_requested:
             try:
                 self.pool.evaluate(request.scenario, request.n_vars, result.x[None, :],
-                                   publish_telemetry=True)
+                                   publish_telemetry=True, integrator=request.integrator)
             except (ValueError, ServiceCallError) as error:
                 self.get_logger().warning(f'telemetry run of the optimum failed: {error}')
         message = Optimise.Result(

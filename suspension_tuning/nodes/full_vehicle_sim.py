@@ -55,6 +55,7 @@ from suspension_tuning.nodes._services import serve
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.paths import dump_yaml
 from suspension_tuning.telemetry import stamp, telemetry_messages
+from suspension_tuning.vehicle.params import load_vehicle_params
 from suspension_tuning.vehicle.simplified import SimplifiedInputs
 
 #: Vehicle states and valve states must not be dropped in a step-locked run.
@@ -129,6 +130,8 @@ class FullVehicleSimNode(Node):
         self.declare_parameter('model', 'builtin')
         self.declare_parameter('fmu_path', '')
         self.declare_parameter('fmu_mapping', '')
+        # full-model integrator when a request names none (config/vehicle.yaml default)
+        self.declare_parameter('integrator', load_vehicle_params().integrator.method)
         try:  # before anything else: a bad FMU set-up leaves nothing half-started
             self.fmu = worker_model(*(str(self.get_parameter(name).value)
                                       for name in ('model', 'fmu_path', 'fmu_mapping')))
@@ -159,8 +162,9 @@ class FullVehicleSimNode(Node):
             designs = evaluation.parse_designs(request.scenario, int(request.n_vars),
                                                request.designs)
             if self.fmu is None:
-                result = evaluation.evaluate(request.scenario, designs,
-                                             controllers=self._controllers(request, designs))
+                result = evaluation.evaluate(
+                    request.scenario, designs, controllers=self._controllers(request, designs),
+                    integrator=request.integrator or self.get_parameter('integrator').value)
             else:
                 result = self.fmu.evaluate(request.scenario, designs)
         except ValueError as error:

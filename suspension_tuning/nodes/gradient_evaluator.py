@@ -81,9 +81,10 @@ class GradientEvaluatorNode(Node):
 
     # ---------------------------------------------------------------- calibrate
     def _cache_path(self, key: dict) -> Path:
+        tail = f"_{key['integrator']}" if 'integrator' in key else ''
         return self.calibration_dir / (f"{key['scenario']}_{key['n_vars']}var_"
                                        f"{key['n_samples']}s_{key['seed']}_"
-                                       f"{key['config_hash']}.json")
+                                       f"{key['config_hash']}{tail}.json")
 
     def _on_calibrate(self, request: Calibrate.Request,
                       response: Calibrate.Response) -> Calibrate.Response:
@@ -93,6 +94,8 @@ class GradientEvaluatorNode(Node):
             n_samples, seed = calibration_settings(
                 int(request.n_samples or self.get_parameter('default_samples').value))
             key = scaling_key(scenario, n_vars, n_samples, seed)
+            if request.integrator:  # samples of a named integrator get their own cache
+                key['integrator'] = request.integrator
             path = self._cache_path(key)
             scaling = None
             if path.exists() and not request.force:
@@ -137,7 +140,8 @@ class GradientEvaluatorNode(Node):
         for part in np.array_split(x, -(-len(x) // chunk)):
             try:
                 answers += self.pool.evaluate(scenario, n_vars, part,
-                                              return_inputs=scenario == 'handling')
+                                              return_inputs=scenario == 'handling',
+                                              integrator=key.get('integrator', ''))
             except ValueError as error:
                 raise ValueError(f'full-model samples failed: {error}') from error
             self.progress_pub.publish(CalibrationProgress(

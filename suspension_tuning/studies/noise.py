@@ -11,7 +11,13 @@ model's run at the sweep centre, as all 2n stencil points of one gradient do; th
 variant with each point's own full-run inputs is reported as ``simplified_own_inputs``
 (it inherits the full model's noise through the inputs).
 
-Run ``python -m suspension_tuning.studies.noise --scenario ride --out DIR``.
+The full model runs with the fixed-step RK4 kernel ('full') and, with
+``--variable-step``, also with the error-controlled variable-step integrator
+('full_variable_step', config/vehicle.yaml ``integration.variable_step``), whose step
+grid changes with the design as a multibody code's does; :func:`step_size_history`
+plots its step sizes over one run.
+
+Run ``python -m suspension_tuning.studies.noise --scenario ride --variable-step --out DIR``.
 """
 
 from __future__ import annotations
@@ -84,6 +90,11 @@ def noise_measure(x: Array, values: Array, degree: int = 2, step: float = 0.025)
     }
 
 
+def _ratio(a: float, b: float) -> float:
+    """a / b for noise levels: inf when only b is zero, NaN when both are (constant g)."""
+    return a / b if b > 0 else (float('inf') if a > 0 else float('nan'))
+
+
 def sweep_x1(
     scenario: str,
     scaling: Scaling | None = None,
@@ -92,15 +103,26 @@ def sweep_x1(
     half_width: float | None = None,
     degree: int | None = None,
     png: str | Path | None = None,
+    variable_step: bool = False,
 ) -> dict[str, object]:
     """Sweep x1 through the centre for both models and measure the noise.
+
+    Parameters
+    ----------
+    variable_step : bool
+        Also run the full model with the variable-step integrator (config/vehicle.yaml
+        ``integration.variable_step``) as model 'full_variable_step'.
 
     Returns
     -------
     dict
-        'x1' (k,), 'full' (k, 5), 'simplified' (k, 5) and, for handling,
-        'simplified_own_inputs' (k, 5); 'noise' {model: {function: noise_measure}};
-        'noise_ratio' {function: full noise_rms / simplified noise_rms}.
+        'x1' (k,), 'full' (k, 5) (fixed-step RK4), 'simplified' (k, 5) and, for
+        handling, 'simplified_own_inputs' (k, 5), with ``variable_step`` also
+        'full_variable_step' (k, 5); 'noise' {model: {function: noise_measure}};
+        'noise_ratio' {function: full noise_rms / simplified noise_rms}; with
+        ``variable_step`` also 'noise_ratio_variable_to_fixed' (noise_rms ratio) and
+        'noise_ratio_simplified_to_variable' (noise_rel ratio: relative noise, which
+        the linear eq. 25 scaling leaves unchanged).
     """
     cfg = load_simplified_config()
     nc = cfg['noise_study']
@@ -112,8 +134,11 @@ def sweep_x1(
     x = np.full((n_points, n_vars), CENTRE)
     x[:, 0] = x1
     centre = n_points // 2
-    full_res = run_scenario(scenario, x)
+    full_res = run_scenario(scenario, x, integrator='fixed_step')
     models = {'full': np.column_stack([full_res.f, full_res.g])}
+    if variable_step:
+        var = run_scenario(scenario, x, integrator='variable_step')
+        models['full_variable_step'] = np.column_stack([var.f, var.g])
     if scenario == 'ride':
         models['simplified'] = simplified_values('ride', x, n_vars, None, scaling)
     else:
@@ -132,11 +157,26 @@ def sweep_x1(
         m: {nm: noise_measure(x1, v[:, i], degree, step) for i, nm in enumerate(FUNCTION_NAMES)}
         for m, v in models.items()
     }
-    ratio = {}
-    for nm in FUNCTION_NAMES:
-        a, b = noise['full'][nm]['noise_rms'], noise['simplified'][nm]['noise_rms']
-        ratio[nm] = a / b if b > 0 else (float('inf') if a > 0 else float('nan'))
+    ratio = {
+        nm: _ratio(noise['full'][nm]['noise_rms'], noise['simplified'][nm]['noise_rms'])
+        for nm in FUNCTION_NAMES
+    }
     out = {'x1': x1, **models, 'noise': noise, 'noise_ratio': ratio}
+    if variable_step:
+        nv = noise['full_variable_step']
+        out['noise_ratio_variable_to_fixed'] = {
+            nm: _ratio(nv[nm]['noise_rms'], noise['full'][nm]['noise_rms'])
+            for nm in FUNCTION_NAMES
+        }
+        rel = {
+            m: {nm: d[nm]['noise_rel'] if np.isfinite(d[nm]['noise_rel']) else 0.0
+                for nm in FUNCTION_NAMES}
+            for m, d in noise.items()
+        }  # fmt: skip
+        out['noise_ratio_simplified_to_variable'] = {
+            nm: _ratio(rel['simplified'][nm], rel['full_variable_step'][nm])
+            for nm in FUNCTION_NAMES
+        }
     if png is not None:
         _plot(png, scenario, x1, models)
     return out
@@ -179,6 +219,56 @@ def step_sweep(
             'cosine': cos}  # fmt: skip
 
 
+def step_size_history(
+    scenario: str, n_vars: int = 2, png: str | Path | None = None, capacity: int = 20000
+) -> dict[str, Array]:
+    """Step sizes of the variable-step integrator over one run at the centre design.
+
+    Returns
+    -------
+    dict
+        't_s', 'h_s' (accepted steps: end time and size), 'accepted', 'rejected',
+        'derivative_calls', and the run's 't_full_s' with the tyre normal forces
+        'fz_n' (4, m) for the plot's lower panel.
+    """
+    x = np.full((1, n_vars), CENTRE)
+    res = run_scenario(scenario, x, integrator='variable_step', step_log_capacity=capacity)
+    st = res.integrator['stats']
+    n = int(st['accepted_steps'][0])
+    out = {
+        't_s': st['step_log_t_s'][0, : min(n, capacity)],
+        'h_s': st['step_log_h_s'][0, : min(n, capacity)],
+        'accepted': n,
+        'rejected': int(st['rejected_steps'][0]),
+        'derivative_calls': int(st['derivative_calls'][0]),
+        't_full_s': res.histories['t_s'],
+        'fz_n': res.histories['tyre_fz_n'][0],
+    }
+    if png is not None:
+        import matplotlib
+
+        matplotlib.use('Agg')
+        import matplotlib.pyplot as plt
+
+        fig, axs = plt.subplots(2, 1, figsize=(12, 6), sharex=True)
+        axs[0].semilogy(out['t_s'], 1e3 * out['h_s'], '.', ms=2)
+        axs[0].set_ylabel('accepted step h [ms]')
+        axs[0].set_title(
+            f'{scenario}: variable-step DOPRI5 at the centre design, {n} steps, '
+            f'{out["rejected"]} rejected, {out["derivative_calls"]} derivative calls'
+        )
+        for c, name in enumerate(('FL', 'FR', 'RL', 'RR')):
+            axs[1].plot(out['t_full_s'], 1e-3 * out['fz_n'][c], lw=0.6, label=name)
+        axs[1].set_ylabel('tyre normal force [kN]')
+        axs[1].set_xlabel('t [s]')
+        axs[1].legend(fontsize=7, ncol=4)
+        fig.tight_layout()
+        Path(png).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(png, dpi=90)
+        plt.close(fig)
+    return out
+
+
 def _plot(png, scenario, x1, models) -> None:
     import matplotlib
 
@@ -186,11 +276,14 @@ def _plot(png, scenario, x1, models) -> None:
     import matplotlib.pyplot as plt
 
     fig, axs = plt.subplots(1, 2, figsize=(12, 4.2))
-    styles = {'full': '-o', 'simplified': '-s', 'simplified_own_inputs': ':^'}
+    styles = {'full': '-o', 'full_variable_step': '-x', 'simplified': '-s',
+              'simplified_own_inputs': ':^'}  # fmt: skip
+    labels = {'full': 'full, fixed-step RK4', 'full_variable_step': 'full, variable-step DOPRI5',
+              'simplified': 'simplified', 'simplified_own_inputs': 'simplified, own inputs'}
     for m, v in models.items():
-        axs[0].plot(x1, v[:, 0], styles[m], ms=3, label=m)
+        axs[0].plot(x1, v[:, 0], styles[m], ms=3, label=labels[m])
         for i, nm in enumerate(FUNCTION_NAMES[1:], start=1):
-            axs[1].plot(x1, v[:, i], styles[m], ms=3, label=f'{m} {nm}')
+            axs[1].plot(x1, v[:, i], styles[m], ms=3, label=f'{labels[m]} {nm}')
     axs[0].set_title(f'{scenario}: objective f vs x1 (Figs 7-8)')
     axs[1].set_title(f'{scenario}: tyre-hop constraints g vs x1')
     for ax in axs:
@@ -209,6 +302,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument('--n-vars', type=int, default=2, choices=(2, 4))
     ap.add_argument('--out', default='studies_out', help='output directory')
     ap.add_argument('--unscaled', action='store_true', help='skip the eq. 25 scaling')
+    ap.add_argument('--variable-step', action='store_true',
+                    help='also sweep the variable-step full model and plot its step sizes')
     args = ap.parse_args(argv)
     out = Path(args.out)
     sc = None
@@ -217,7 +312,7 @@ def main(argv: list[str] | None = None) -> int:
             out / f'scaling_{args.scenario}_{args.n_vars}.json', args.scenario, args.n_vars
         )
     png = out / f'noise_{args.scenario}_{args.n_vars}.png'
-    res = sweep_x1(args.scenario, sc, args.n_vars, png=png)
+    res = sweep_x1(args.scenario, sc, args.n_vars, png=png, variable_step=args.variable_step)
     for m, d in res['noise'].items():
         for nm, v in d.items():
             for k in ('noise_rms', 'residual_rms', 'noise_rel', 'fd_gradient_noise'):
@@ -225,6 +320,16 @@ def main(argv: list[str] | None = None) -> int:
     for nm, r in res['noise_ratio'].items():
         print(f'{args.scenario}_noise_ratio_full_over_simplified_{nm}: {r:.3e}')
     print(f'{args.scenario}_noise_png: {png}')
+    if args.variable_step:
+        for key in ('noise_ratio_variable_to_fixed', 'noise_ratio_simplified_to_variable'):
+            for nm, r in res[key].items():
+                print(f'{args.scenario}_{key}_{nm}: {r:.3e}')
+        steps_png = out / f'steps_{args.scenario}.png'
+        hist = step_size_history(args.scenario, args.n_vars, steps_png)
+        print(f'{args.scenario}_variable_step_accepted: {hist["accepted"]}')
+        print(f'{args.scenario}_variable_step_rejected: {hist["rejected"]}')
+        print(f'{args.scenario}_variable_step_median_h_s: {np.median(hist["h_s"]):.4g}')
+        print(f'{args.scenario}_step_size_png: {steps_png}')
     st = step_sweep(args.scenario, sc, args.n_vars)
     for h, dfa, dfs, c in zip(st['steps'], st['df_full'], st['df_simplified'], st['cosine'],
                               strict=True):  # fmt: skip

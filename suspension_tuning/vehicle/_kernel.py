@@ -1,6 +1,7 @@
 """Compiled (numba) kernel of the full vehicle model: state derivative and RK4 stepping.
 
-This is the only compiled module.  ``full_model.derivative_numpy`` is an independent plain
+``_variable_step.py`` integrates the same ``deriv`` with an error-controlled
+Dormand-Prince 5(4) pair instead.  ``full_model.derivative_numpy`` is an independent plain
 numpy implementation of the same equations built on ``strut.py`` and ``tyre.py``; the test
 suite checks the two against each other (test_full_model.py).
 

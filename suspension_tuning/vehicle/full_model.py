@@ -28,10 +28,17 @@ Equations are written as ``M acc = Q(state)`` with constant M; see ``mass_matrix
 ``generalised_forces_numpy``.  The compiled kernel (``_kernel.py``) evaluates the same
 equations; ``derivative_numpy`` is the plain numpy reference the tests compare it with.
 
-Integration: classical RK4 with a fixed step (config/vehicle.yaml, 2 ms), independent per
-design, so a design gives the same bits alone, in any batch, and whether it is run in one
-call or in chunks of steps.  Driver and speed controller act at a fixed control period
-(zero-order hold) aligned to absolute step counts.
+Integration (config/vehicle.yaml ``integration.method``, selectable per model):
+
+- ``fixed_step`` (default): classical RK4 with a fixed step (2 ms), independent per
+  design, so a design gives the same bits alone, in any batch, and whether it is run in
+  one call or in chunks of steps;
+- ``variable_step``: the Dormand-Prince 5(4) pair with error control and dense output
+  onto the same 2 ms output grid (``_variable_step.py``), as a multibody code integrates;
+  same bits alone or in any batch, and in chunks that end on control ticks.
+
+Driver and speed controller act at a fixed control period (zero-order hold) aligned to
+absolute step counts of the output grid.
 """
 
 from __future__ import annotations
@@ -44,10 +51,11 @@ import numpy as np
 from scipy import linalg, ndimage, optimize
 
 from . import _kernel as K  # noqa: N812
+from . import _variable_step as VS  # noqa: N812
 from . import strut as strut_mod
 from . import tyre as tyre_mod
 from ._buffers import RECORDING
-from .params import VehicleParams, load_vehicle_params
+from .params import IntegratorSettings, VehicleParams, load_vehicle_params, with_integrator
 
 CORNERS = ('FL', 'FR', 'RL', 'RR')
 AXLES = ('front', 'rear')
@@ -542,10 +550,25 @@ class FullVehicleModel:
     road : RoadInput or road.RoadProfile, optional
         Road under the two wheel tracks (default flat).  A RoadProfile is enveloped over the
         tyre contact length.
+    integrator : str, optional
+        'fixed_step' or 'variable_step' (default: ``params.integrator.method``, from
+        config/vehicle.yaml); the variable-step settings come from ``params.integrator``.
+    step_log_capacity : int
+        Accepted steps of the variable-step integrator logged per design (time, size),
+        for plots; 0 = none.
     """
 
-    def __init__(self, params: VehicleParams | None = None, road=None) -> None:
-        self.params = params if params is not None else load_vehicle_params()
+    def __init__(
+        self,
+        params: VehicleParams | None = None,
+        road=None,
+        integrator: str | None = None,
+        step_log_capacity: int = 0,
+    ) -> None:
+        params = params if params is not None else load_vehicle_params()
+        self.params = with_integrator(params, integrator)
+        self.integrator: IntegratorSettings = self.params.integrator
+        self.step_log_capacity = int(step_log_capacity)
         if road is None:
             road = RoadInput.flat()
         elif not isinstance(road, RoadInput):
@@ -652,6 +675,15 @@ class FullVehicleModel:
             c[K.C_KP], c[K.C_KI] = speed_controller.kp_n_per_mps, speed_controller.ki_n_per_m
             c[K.C_FLIM] = speed_controller.force_limit_n
         self._C = c
+        it = self.integrator
+        self._ctl = np.zeros(VS.N_TOL)
+        self._ctl[VS.T_RTOL], self._ctl[VS.T_ATOL] = it.rtol, it.atol
+        self._ctl[VS.T_HMIN], self._ctl[VS.T_HMAX] = it.min_step_s, it.max_step_s
+        self._ctl[VS.T_SAFETY], self._ctl[VS.T_FACMIN] = it.safety, it.fac_min
+        self._ctl[VS.T_FACMAX], self._ctl[VS.T_BETA] = it.fac_max, it.beta
+        self._hstate = np.full(batch, it.initial_step_s)
+        self._vstats = np.zeros((batch, VS.N_STATS))
+        self._step_log = np.zeros((batch, 2, self.step_log_capacity))
         self.step_index = 0
         self._record = record
         self._full_chunks: list[np.ndarray] = []
@@ -753,38 +785,84 @@ class FullVehicleModel:
         else:
             full = np.empty((b, K.N_FULL, 0))
             hist = np.empty((b, K.N_HIST, 0))
+        if self.integrator.method == 'variable_step':
+            self._run_variable(n, full, hist)
+        else:
+            K.integrate(
+                *self._kernel_inputs(),
+                self.dt_s,
+                n,
+                self.step_index,
+                self.decimation,
+                full,
+                hist,
+                0,
+                0,
+                self._cstates,
+                self._C,
+                self._ytab,
+            )
+        self.step_index += n
+        if self._record:
+            self._full_chunks.append(full)
+            if hist.shape[2]:
+                self._hist_chunks.append(hist)
+
+    def _kernel_inputs(self) -> tuple:
+        """States, strut states, inputs, parameters and road: what both kernels take first."""
         r = self.road
-        K.integrate(
-            self._state,
-            self._ss,
-            self._inputs,
-            self._P,
-            self._Minv,
-            self._pc,
-            self._dk,
-            self._dv,
-            self._ds,
-            r.x0_m,
-            r.dx_m,
-            r.z_left_m,
-            r.z_right_m,
+        return (self._state, self._ss, self._inputs, self._P, self._Minv, self._pc, self._dk,
+                self._dv, self._ds, r.x0_m, r.dx_m, r.z_left_m, r.z_right_m)  # fmt: skip
+
+    def _run_variable(self, n: int, full: np.ndarray, hist: np.ndarray) -> None:
+        VS.integrate_variable(
+            *self._kernel_inputs(),
             self.dt_s,
             n,
             self.step_index,
             self.decimation,
             full,
             hist,
-            0,
-            0,
             self._cstates,
             self._C,
             self._ytab,
+            self._ctl,
+            *VS.PAIRS[self.integrator.pair],
+            self.integrator.controllers == 'continuous',
+            self._hstate,
+            self._vstats,
+            self._step_log,
         )
-        self.step_index += n
-        if self._record:
-            self._full_chunks.append(full)
-            if hist.shape[2]:
-                self._hist_chunks.append(hist)
+        failed = np.flatnonzero(self._vstats[:, VS.S_FAILED] > 0)
+        if failed.size:
+            b = int(failed[0])
+            raise RuntimeError(
+                f'variable-step integration failed for design {b} at t = '
+                f'{self._vstats[b, VS.S_FAIL_T]:.4f} s: step below '
+                f'{self.integrator.min_step_s:g} s (rtol {self.integrator.rtol:g}, '
+                f'atol {self.integrator.atol:g})'
+            )
+
+    def integrator_stats(self) -> dict[str, np.ndarray]:
+        """Variable-step statistics per design since reset (zeros for fixed steps).
+
+        Keys: accepted_steps, rejected_steps, derivative_calls, min_step_s,
+        max_step_s, and step_log_t_s, step_log_h_s (batch, m): end time and size of
+        the first ``step_log_capacity`` accepted steps (NaN beyond the logged ones).
+        """
+        st = self._vstats
+        nlog = st[:, VS.S_NLOG].astype(int)
+        cols = np.arange(self._step_log.shape[2])[None, :]
+        keep = cols < nlog[:, None]
+        return {
+            'accepted_steps': st[:, VS.S_ACCEPTED].astype(int),
+            'rejected_steps': st[:, VS.S_REJECTED].astype(int),
+            'derivative_calls': st[:, VS.S_CALLS].astype(int),
+            'min_step_s': st[:, VS.S_HMIN_USED].copy(),
+            'max_step_s': st[:, VS.S_HMAX_USED].copy(),
+            'step_log_t_s': np.where(keep, self._step_log[:, 0], np.nan),
+            'step_log_h_s': np.where(keep, self._step_log[:, 1], np.nan),
+        }
 
     def set_valve_state(
         self, spring_soft: np.ndarray | None = None, damping_high: np.ndarray | None = None
@@ -896,7 +974,12 @@ class FullVehicleModel:
         hist = _joined(self._hist_chunks, (b, K.N_HIST, 0))
         t_full = np.arange(full.shape[2]) * self.dt_s
         t_hist = np.arange(hist.shape[2]) * self.dt_s * self.decimation
-        return SimulationRecord(self.dt_s, self.decimation, full, hist, t_full, t_hist, self._wall)
+        extra = {'integrator': self.integrator.method}
+        if self.integrator.method == 'variable_step':
+            extra['integrator_stats'] = self.integrator_stats()
+        return SimulationRecord(
+            self.dt_s, self.decimation, full, hist, t_full, t_hist, self._wall, extra
+        )
 
     def simulate(self, duration_s: float) -> SimulationRecord:
         """Run ``duration_s`` from the current state and return the record."""

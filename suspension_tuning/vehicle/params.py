@@ -7,7 +7,7 @@ the sourced ones (sprung mass, static loads).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -74,6 +74,93 @@ class StrutParams:
 
 
 PACEJKA_KEYS = tuple(f'a{i}' for i in range(14))
+
+#: Integrators of the full model: the fixed-step RK4 kernel (default) and the
+#: error-controlled Dormand-Prince 5(4) pair of a multibody code.
+INTEGRATORS = ('fixed_step', 'variable_step')
+#: Embedded Runge-Kutta pairs of the variable-step integrator.
+RK_PAIRS = ('dopri5', 'bs32')
+#: How the variable-step integrator evaluates the driver and the speed controller.
+CONTROLLER_MODES = ('continuous', 'sampled')
+
+
+@dataclass(frozen=True)
+class IntegratorSettings:
+    """How the full model is integrated (config/vehicle.yaml ``integration``).
+
+    Attributes
+    ----------
+    method : str
+        'fixed_step' (classical RK4, ``dt_s``) or 'variable_step' (an embedded
+        Runge-Kutta pair with step-size control and dense output onto the ``dt_s`` grid).
+    pair : str
+        'dopri5' (Dormand-Prince 5(4)) or 'bs32' (Bogacki-Shampine 3(2)).
+    controllers : str
+        Variable step only: 'continuous' (driver and speed controller evaluated at every
+        stage, as control elements of a multibody model) or 'sampled' (zero-order hold
+        at ``control_period_s`` as in the fixed-step kernel; the integrator stops at
+        every sample).
+    rtol, atol : float
+        Relative and absolute local error tolerances of the variable-step integrator
+        (SI units of each state: m, rad, m/s, rad/s).
+    initial_step_s, min_step_s, max_step_s : float
+        First proposed step, the step below which a run fails, the largest step [s].
+    safety, fac_min, fac_max, beta : float
+        Step-size controller: safety factor, smallest and largest step ratio, PI
+        stabilisation exponent (Hairer-Norsett-Wanner IV.2).
+    """
+
+    method: str
+    pair: str
+    controllers: str
+    rtol: float
+    atol: float
+    initial_step_s: float
+    min_step_s: float
+    max_step_s: float
+    safety: float
+    fac_min: float
+    fac_max: float
+    beta: float
+
+    def __post_init__(self) -> None:
+        """Validate (ValueError naming the setting)."""
+        if self.method not in INTEGRATORS:
+            raise ValueError(f'unknown integrator {self.method!r}; '
+                             f'valid: {", ".join(INTEGRATORS)}')
+        if self.controllers not in CONTROLLER_MODES:
+            raise ValueError(f'unknown controller mode {self.controllers!r}; '
+                             f'valid: {", ".join(CONTROLLER_MODES)}')
+        if self.pair not in RK_PAIRS:
+            raise ValueError(f'unknown Runge-Kutta pair {self.pair!r}; '
+                             f'valid: {", ".join(RK_PAIRS)}')
+        for name in ('rtol', 'atol', 'initial_step_s', 'min_step_s', 'max_step_s', 'safety'):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0.0):
+                raise ValueError(f'integration.{name} must be positive and finite, got {value}')
+        if not self.min_step_s <= self.initial_step_s <= self.max_step_s:
+            raise ValueError('integration: need min_step_s <= initial_step_s <= max_step_s')
+        if not (0.0 < self.fac_min < 1.0 < self.fac_max and 0.0 <= self.beta < 0.2):
+            raise ValueError('integration: need 0 < fac_min < 1 < fac_max and 0 <= beta < 0.2')
+
+    @classmethod
+    def from_yaml_dict(cls, d: dict[str, Any]) -> IntegratorSettings:
+        """Build from the ``integration`` mapping of config/vehicle.yaml."""
+        v = d['variable_step']
+        return cls(
+            method=str(d['method']),
+            pair=str(v['pair']),
+            controllers=str(v['controllers']),
+            rtol=float(v['rtol']),
+            atol=float(v['atol']),
+            initial_step_s=float(v['initial_step_s']),
+            min_step_s=float(v['min_step_s']),
+            max_step_s=float(v['max_step_s']),
+            safety=float(v['safety']),
+            fac_min=float(v['fac_min']),
+            fac_max=float(v['fac_max']),
+            beta=float(v['beta']),
+        )
 
 
 @dataclass(frozen=True)
@@ -175,6 +262,7 @@ class VehicleParams:
     history_decimation: int
     strut: StrutParams
     tyre: TyreParams
+    integrator: IntegratorSettings
     source_files: tuple[str, ...] = field(default=())
 
     # ---- derived quantities -------------------------------------------------------------
@@ -296,6 +384,7 @@ def load_vehicle_params(
         history_decimation=int(integ['history_decimation']),
         strut=strut,
         tyre=tyre,
+        integrator=IntegratorSettings.from_yaml_dict(integ),
         source_files=(str(path), str(strut_path), str(tyre_path)),
     )
     if not 0.0 < p.a_m < p.wheelbase_m:
@@ -304,6 +393,28 @@ def load_vehicle_params(
     if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
         raise ValueError('control_period_s must be an integer multiple of time_step_s')
     return p
+
+
+def with_integrator(
+    params: VehicleParams, method: str | None = None, **settings: float
+) -> VehicleParams:
+    """Return ``params`` with another integrator and/or integrator settings.
+
+    Parameters
+    ----------
+    params : VehicleParams
+        Parameters.
+    method : str, optional
+        'fixed_step' or 'variable_step' (None: keep).
+    **settings : float
+        Fields of :class:`IntegratorSettings` to change (e.g. ``rtol=1e-6``).
+    """
+    changes = dict(settings)
+    if method is not None:
+        changes['method'] = method
+    if not changes:
+        return params
+    return replace(params, integrator=replace(params.integrator, **changes))
 
 
 def load_scenarios_config(path: str | Path | None = None) -> dict[str, Any]:

@@ -41,7 +41,12 @@ from .full_model import (
     ValveState,
     outputs_from_channels,
 )
-from .params import VehicleParams, load_scenarios_config, load_vehicle_params
+from .params import (
+    VehicleParams,
+    load_scenarios_config,
+    load_vehicle_params,
+    with_integrator,
+)
 
 SCENARIOS = ('ride', 'handling')
 
@@ -68,6 +73,9 @@ class ScenarioResult:
         Wall-clock time of the simulation (excluding set-up) [s].
     simulated_time_s : float
         Simulated time per design [s].
+    integrator : dict
+        'method' ('fixed_step' or 'variable_step') and, for variable steps, 'stats'
+        (``FullVehicleModel.integrator_stats``: step counts, step log).
     """
 
     name: str
@@ -78,6 +86,7 @@ class ScenarioResult:
     histories: dict[str, np.ndarray] = field(repr=False)
     wall_time_s: float
     simulated_time_s: float
+    integrator: dict = field(default_factory=dict, repr=False)
 
 
 def ride_road_spec(cfg: dict) -> road_mod.RoadSpec:
@@ -114,6 +123,8 @@ def run_scenario(
     params: VehicleParams | None = None,
     n_vars: int | None = None,
     config: dict | None = None,
+    integrator: str | None = None,
+    step_log_capacity: int = 0,
 ) -> ScenarioResult:
     """Simulate a scenario for one or many designs.
 
@@ -130,6 +141,12 @@ def run_scenario(
         Number of design variables (default: the length of x's last axis).
     config : dict, optional
         Scenario configuration (default config/scenarios.yaml).
+    integrator : str, optional
+        'fixed_step' (RK4) or 'variable_step' (Dormand-Prince 5(4) with error control);
+        default ``params.integrator.method`` (config/vehicle.yaml: fixed_step).
+    step_log_capacity : int
+        Variable-step integrator: accepted steps logged per design (time, size) into
+        ``result.integrator['stats']`` (0 = none).
 
     Returns
     -------
@@ -142,12 +159,22 @@ def run_scenario(
         Unknown scenario name, or a bad design vector (wrong length, NaN, out of bounds).
     """
     _check_name(name)
-    params = params if params is not None else load_vehicle_params()
+    params = with_integrator(params if params is not None else load_vehicle_params(), integrator)
     cfg = config if config is not None else load_scenarios_config()
     xv, setting = _settings(name, x, n_vars, params)
     if name == 'ride':
-        return _run_ride(xv, setting, params, cfg['ride'], cfg['handling']['speed_controller'])
-    return _run_handling(xv, setting, params, cfg['handling'])
+        return _run_ride(
+            xv, setting, params, cfg['ride'], cfg['handling']['speed_controller'],
+            step_log_capacity,
+        )  # fmt: skip
+    return _run_handling(xv, setting, params, cfg['handling'], step_log_capacity)
+
+
+def _integrator_info(rec: SimulationRecord) -> dict:
+    info = {'method': rec.extra.get('integrator', 'fixed_step')}
+    if 'integrator_stats' in rec.extra:
+        info['stats'] = rec.extra['integrator_stats']
+    return info
 
 
 def decimated_histories(rec: SimulationRecord) -> dict[str, np.ndarray]:
@@ -162,7 +189,12 @@ def decimated_histories(rec: SimulationRecord) -> dict[str, np.ndarray]:
 
 
 def _run_ride(
-    x: np.ndarray, setting: SuspensionSetting, params: VehicleParams, cfg: dict, sc_cfg: dict
+    x: np.ndarray,
+    setting: SuspensionSetting,
+    params: VehicleParams,
+    cfg: dict,
+    sc_cfg: dict,
+    step_log_capacity: int = 0,
 ) -> ScenarioResult:
     road, road_len = _ride_road(ride_road_spec(cfg), params.tyre.contact_length_m)
     speed = float(cfg['speed_kmh']) / 3.6
@@ -175,7 +207,7 @@ def _run_ride(
         )
     batch = x.shape[0]
     sc = manoeuvre.SpeedController.from_yaml_dict(sc_cfg, speed)
-    model = FullVehicleModel(params, road)
+    model = FullVehicleModel(params, road, step_log_capacity=step_log_capacity)
     model.reset(setting, ValveState.ride(batch), speed, x0_m=x0, speed_controller=sc)
     rec = model.simulate(duration)
     full = outputs_from_channels(rec.full, rec.hist[:, :, :0])
@@ -185,7 +217,9 @@ def _run_ride(
     hist = decimated_histories(rec)
     met['strut_stroke_max_m'] = np.max(np.abs(hist['strut_stroke_m']), axis=-1)
     met['speed_mean_mps'] = np.mean(hist['speed_mps'], axis=-1)
-    return ScenarioResult('ride', x, f, g, met, hist, rec.wall_time_s, duration)
+    return ScenarioResult(
+        'ride', x, f, g, met, hist, rec.wall_time_s, duration, _integrator_info(rec)
+    )
 
 
 def ride_objective(
@@ -277,13 +311,17 @@ def crossing_time(x_hist: np.ndarray, t: np.ndarray, x_target: float) -> np.ndar
 
 
 def _run_handling(
-    x: np.ndarray, setting: SuspensionSetting, params: VehicleParams, cfg: dict
+    x: np.ndarray,
+    setting: SuspensionSetting,
+    params: VehicleParams,
+    cfg: dict,
+    step_log_capacity: int = 0,
 ) -> ScenarioResult:
     track, driver, sc, speed = handling_setup(params, cfg)
     lead, run_out = float(cfg['lead_in_m']), float(cfg['run_out_m'])
     duration = (lead + track.x_end_m + run_out) / speed
     batch = x.shape[0]
-    model = FullVehicleModel(params, None)
+    model = FullVehicleModel(params, None, step_log_capacity=step_log_capacity)
     model.reset(
         setting, ValveState.handling(batch), speed, x0_m=-lead, driver=driver, speed_controller=sc
     )
@@ -328,7 +366,9 @@ def _run_handling(
         't_first_lane_change_s': shared['t_first_lane_change_s'],
         't_manoeuvre_s': shared['t_manoeuvre_s'],
     }
-    return ScenarioResult('handling', x, f, g, met, hist, rec.wall_time_s, duration)
+    return ScenarioResult(
+        'handling', x, f, g, met, hist, rec.wall_time_s, duration, _integrator_info(rec)
+    )
 
 
 def handling_objective(
