@@ -34,7 +34,7 @@ from suspension_tuning.vehicle.scenarios import run_scenario
 
 N_VARS = 4
 REPEATS = 40
-TARGET = 0.2  # [-] issue 5: one n = 4 gradient <= 0.2 full-model runs
+TARGET = 0.2  # [-] one n = 4 gradient <= 0.2 full-model runs
 
 
 def unit_scaling(scenario: str):

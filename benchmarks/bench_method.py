@@ -1,4 +1,4 @@
-"""Does the simplified-gradient approach pay off? 4-variable ride (issue 9, paper section 2).
+"""Does the simplified-gradient approach pay off? 4-variable ride (paper section 2).
 
 Runs the method study's 4-variable ride case (:func:`suspension_tuning.study.run_case`):
 Dynamic-Q with eq. 25-scaled simplified-model gradients (calibrated with 30, 16 and 10
@@ -8,7 +8,7 @@ the design space and from the baseline vehicle, and the reference optimum (7^4 g
 then SLSQP polish from the best grid points and every method's final point).  No bags.
 
 Counts are totals over both start points.  The calibration is counted once per run (a
-run that calibrates afresh; the coordinator caches it across runs).  Issue 9 targets:
+run that calibrates afresh; the coordinator caches it across runs).  Targets:
 SLSQP's full-model runs over those of Dynamic-Q with simplified gradients >= 5 without
 the calibration and >= 2.5 with it, at an objective no more than 1 % worse; fewer
 calibration samples are allowed if the optimum holds.  The headline lines use the
@@ -53,9 +53,9 @@ from suspension_tuning.study import (
 
 SCENARIO = 'ride'
 N_VARS = 4
-HEADLINE_CANDIDATES = (30, 16)  # [P s.6.3.1] 30; 16 = the 2^4 corners (issue 9: fewer ok)
+HEADLINE_CANDIDATES = (30, 16)  # [P s.6.3.1] 30; 16 = the 2^4 corners (fewer are allowed)
 INFO_SAMPLES = (10,)  # information only: 10 of the 16 corners
-MAX_OBJECTIVE_GAP_PCT = 1.0  # [%] issue 9: no more than 1 % worse than SLSQP
+MAX_OBJECTIVE_GAP_PCT = 1.0  # [%] target: no more than 1 % worse than SLSQP
 NOISY = 'variable_step'
 STEP_SCAN = (0.01, 0.025, 0.05, 0.1)  # [-] normalised steps tried besides h* [E]
 

@@ -1,4 +1,4 @@
-"""``study``: does the simplified-gradient approach pay off? (issue 9, paper section 2).
+"""``study``: does the simplified-gradient approach pay off? (paper section 2).
 
 Thoresson et al. (2009), section 2: with gradients from the eq. 25-scaled simplified
 models an iteration costs one full-model run plus 2n simplified runs ("0.2n + 1"
@@ -87,8 +87,8 @@ INTEGRATORS = ('fixed_step', 'variable_step')
 GRID_POINTS = {2: 41, 4: 7}
 #: The same for ``--quick`` (a smoke run, not a reference worth reporting).
 QUICK_GRID_POINTS = {2: 11, 4: 3}
-#: Calibration sample counts of the simplified-gradient runs [P s.6.3.1: 30; issue 9
-#: allows fewer if the optimum holds: 16 = the 2^4 corners for n = 4].
+#: Calibration sample counts of the simplified-gradient runs [P s.6.3.1: 30;
+#: fewer are allowed if the optimum holds: 16 = the 2^4 corners for n = 4].
 CALIBRATION_SAMPLES = (30, 16)
 #: Grid points per axis of the fixed-step reference in the noisy study [E]: the smooth
 #: model's optimum is found by SLSQP polishing from the methods' final designs and the

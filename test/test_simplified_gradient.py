@@ -87,7 +87,7 @@ def test_handling_gradient_uses_full_run_inputs():
 
 @pytest.mark.parametrize('scenario', ['ride', 'handling'])
 def test_scaled_simplified_model_explains_full_model_over_30_samples(scenario):
-    # issue 5 acceptance: R^2 >= 0.9 of the eq. 25-scaled simplified f against the full
+    # Acceptance: R^2 >= 0.9 of the eq. 25-scaled simplified f against the full
     # model's f over the paper's 30 samples (corners + LHS) of the 2-variable space.
     # Measured at commit time: ride 0.997, handling 0.913 (reported, not tuned).
     sc = calibrate(scenario, 2)

@@ -63,7 +63,7 @@ def test_handling_grid_comparison_writes_plot(tmp_path):
 
 @pytest.mark.parametrize('scenario', ['ride', 'handling'])
 def test_gradient_directions_agree_at_ten_points(scenario):
-    # issue 5 acceptance: full-model vs eq. 25-scaled simplified central-difference
+    # Acceptance: full-model vs eq. 25-scaled simplified central-difference
     # gradients of f at 10 interior LHS points.  Measured at commit time: cosine
     # >= 0.99 (ride) and >= 0.97 (handling) at every point.  The assertion (>= 0.9,
     # i.e. within 26 deg) is what a gradient source for Dynamic-Q needs to point the

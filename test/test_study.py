@@ -1,4 +1,4 @@
-"""Method study (issue 9): run counts add up, the reference is the best, bags reopen.
+"""Method study: run counts add up, the reference is the best, bags reopen.
 
 One quick case: handling, 2 variables, both start points, one calibration of 16 samples,
 an 11 x 11 reference grid.  The handling optimum lies at the corner (dpsf = 3,
