@@ -18,6 +18,7 @@ from scipy.optimize import OptimizeResult
 from suspension_tuning import evaluation
 from suspension_tuning.inspect_bag import last_iteration
 from suspension_tuning.tuning import RunCounter, TuningRequest, optimise
+from suspension_tuning.vehicle.params import INTEGRATORS
 
 
 def resume(bag: str | os.PathLike[str], max_iterations: int | None = None,
@@ -50,8 +51,9 @@ def resume(bag: str | os.PathLike[str], max_iterations: int | None = None,
     request = TuningRequest(config['scenario'], int(config['n_vars']), config['x0'],
                             config['gradient_source'], options, float(config['fd_step']),
                             config.get('constraints') or (),
-                            integrator=config.get('integrator', '') if config.get(
-                                'integrator') in ('fixed_step', 'variable_step') else '')
+                            # 'simulation default' (no integrator named) reads as ''
+                            integrator=config.get('integrator', '')
+                            if config.get('integrator') in INTEGRATORS else '')
     last = state['history'][-1]
     counter = RunCounter(full_runs=int(last['n_full_runs']),
                          simplified_runs=int(last['n_simplified_runs']))

@@ -64,6 +64,7 @@ from suspension_tuning.tuning import (
     physical_settings,
 )
 from suspension_tuning.vehicle.design import X_LOWER, X_UPPER, validate_design
+from suspension_tuning.vehicle.params import INTEGRATORS
 from suspension_tuning.vehicle.scenarios import run_scenario
 
 Array = NDArray[np.float64]
@@ -79,9 +80,6 @@ METHOD_LABELS = {
     'slsqp_best_fd': 'SLSQP, 2-point differences with the noise-optimal step',
     'reference': 'reference optimum',
 }
-#: Integrators of the full model (config/vehicle.yaml integration): fixed-step RK4,
-#: smooth; variable-step Dormand-Prince 5(4) at Adams' default error, noisy.
-INTEGRATORS = ('fixed_step', 'variable_step')
 #: Grid points per axis of the reference search (2 and 4 variables) [E: 41 gives a
 #: 0.025 spacing, the central-difference half step; 7^4 = 2401 full runs for n = 4].
 GRID_POINTS = {2: 41, 4: 7}
