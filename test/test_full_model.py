@@ -136,7 +136,7 @@ def test_kernel_derivative_matches_plain_numpy_reference():
             out,
             *bufs,
         )
-        # same equations, two implementations: agreement to rounding (fastmath kernel)
+        # same equations, two implementations: agreement to rounding (operation order differs)
         np.testing.assert_allclose(out, ref[b], rtol=1e-9, atol=1e-9 * np.max(np.abs(ref[b])))
 
 

@@ -5,6 +5,13 @@ Dormand-Prince 5(4) pair instead.  ``full_model.derivative_numpy`` is an indepen
 numpy implementation of the same equations built on ``strut.py`` and ``tyre.py``; the test
 suite checks the two against each other (test_full_model.py).
 
+Strict IEEE arithmetic (no ``fastmath``) here, in ``_variable_step.py`` and in the
+simplified models' kernels: with fastmath LLVM may fuse and reorder operations
+differently when a function is compiled afresh and when it is loaded from numba's
+cache, and the variable-step model amplifies such last-bit differences into its
+numerical noise (f differed by 1 % between the first process on a machine and the
+next).  Without it a design gives the same bits in every process.
+
 Layouts (all float64):
 
 State ``s`` (N_STATE,): X, Y, psi, u, v, r, then the positions zs, theta, phi_f, phi_r,
@@ -154,7 +161,7 @@ N_WORK = 50
 N_CTRL = 19
 
 
-@njit(cache=True, inline='always', fastmath=True)
+@njit(cache=True, inline="always")
 def _hermite(v, knots, vals, slopes):
     n = knots.shape[0]
     if v <= knots[0]:
@@ -176,7 +183,7 @@ def _hermite(v, knots, vals, slopes):
     )
 
 
-@njit(cache=True, inline='always', fastmath=True)
+@njit(cache=True, inline="always")
 def _pen(d, s):
     if d <= 0.0:
         return 0.0
@@ -185,7 +192,7 @@ def _pen(d, s):
     return d - 0.5 * s
 
 
-@njit(cache=True, inline='always', fastmath=True)
+@njit(cache=True, inline="always")
 def _pacejka(alpha, fz, pc):
     """ISO-sign Pacejka 89 lateral force [N]; alpha rad, fz N (camber 0)."""
     if fz <= 0.0:
@@ -212,7 +219,7 @@ def _pacejka(alpha, fz, pc):
     return -(d * math.sin(c * math.atan(bx - e * (bx - math.atan(bx)))) + sv)
 
 
-@njit(cache=True, inline='always', fastmath=True)
+@njit(cache=True, inline="always")
 def _road(xw, x0, dx, zl, zr, side):
     """Elevation and slope of one track at distance xw (clamped at the ends)."""
     n = zl.shape[0]
@@ -238,7 +245,7 @@ def _road(xw, x0, dx, zl, zr, side):
     return z0 + t * (z1 - z0), slope
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True)
 def deriv(
     s, ss, u_in, P, Minv, pc, dk, dv, ds, rx0, rdx, rzl, rzr, ds_out, full, hist, want_out, work
 ):
@@ -473,7 +480,7 @@ def deriv(
         hist[H_THETA_RATE] = s[I_VEL0 + 1]
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True)
 def y_table(x, ytab, x0, dx):
     """Linear interpolation of the tabulated reference path (clamped at the ends)."""
     n = ytab.shape[0]
@@ -487,7 +494,7 @@ def y_table(x, ytab, x0, dx):
     return ytab[i] + t * (ytab[i + 1] - ytab[i])
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True)
 def controller(s, uin, cstate, C, ytab):
     """Preview steering driver and PI speed controller (zero-order hold update)."""
     u = s[I_U]
@@ -530,7 +537,7 @@ def controller(s, uin, cstate, C, ytab):
             cstate[0] += err * C[C_TC]
 
 
-@njit(cache=True, parallel=True, fastmath=True)
+@njit(cache=True, parallel=True)
 def integrate(
     states,
     sstates,

@@ -66,7 +66,7 @@ OH_ROLL, OH_ROLL_RATE, OH_AY, OH_FZ0, OH_FY0 = 0, 1, 2, 3, 7
 N_H_OUT = 11
 
 
-@njit(cache=True, inline='always', error_model='numpy', fastmath=True)
+@njit(cache=True, inline='always', error_model='numpy')
 def _strut(x, xd, ss_ax, sp, dk, dv, ds):
     """4S4 strut force [N] (strut.strut_force: gas + dpsf damper + stops)."""
     vc = ss_ax[SS_V] - sp[S_AP] * x
@@ -85,7 +85,7 @@ def _strut(x, xd, ss_ax, sp, dk, dv, ds):
     return f_gas + f_damp + f_stop
 
 
-@njit(cache=True, inline='always', error_model='numpy', fastmath=True)
+@njit(cache=True, inline='always', error_model='numpy')
 def _tyre(defl, defl_d, k, c):
     """Point-follower tyre force [N] (tyre.vertical_force, paper eq. 19)."""
     if defl <= 0.0:
@@ -94,7 +94,7 @@ def _tyre(defl, defl_d, k, c):
     return f if f > 0.0 else 0.0
 
 
-@njit(cache=True, error_model='numpy', fastmath=True)
+@njit(cache=True, error_model='numpy')
 def pp_deriv(s, ss, P, dk, dv, ds, zf, zfd, zr, zrd, d, out, want):
     """Pitch-plane state derivative, paper eqs. 15-24 (z up, theta nose down).
 
@@ -138,7 +138,7 @@ def pp_deriv(s, ss, P, dk, dv, ds, zf, zfd, zr, zrd, d, out, want):
         out[O_FSR] = fr
 
 
-@njit(cache=True, inline='always', error_model='numpy', fastmath=True)
+@njit(cache=True, inline='always', error_model='numpy')
 def _pp_acc(zs, th, zaf, zar, zsd, thd, zafd, zard, ssf, ssr, P, dk, dv, ds, zf, zfd, zr, zrd):
     """Accelerations and forces of the pitch-plane model as scalars (same as pp_deriv)."""
     a = P[PP_A]
@@ -155,7 +155,7 @@ def _pp_acc(zs, th, zaf, zar, zsd, thd, zafd, zard, ssf, ssr, P, dk, dv, ds, zf,
     return zsdd, thdd, zafdd, zardd, tf, tr, ff, fr
 
 
-@njit(cache=True, error_model='numpy', fastmath=True, parallel=True)
+@njit(cache=True, error_model='numpy', parallel=True)
 def pp_integrate(states, sstates, P, dk, dv, ds, zf, zfd, zr, zrd, dt, n_steps, out):
     """RK4 over ``n_steps`` for every design (in place); road arrays at half steps.
 
@@ -292,7 +292,7 @@ def pp_integrate(states, sstates, P, dk, dv, ds, zf, zfd, zr, zrd, dt, n_steps, 
         states[bi, 4], states[bi, 5], states[bi, 6], states[bi, 7] = v0, v1, v2, v3
 
 
-@njit(cache=True, inline='always', error_model='numpy', fastmath=True)
+@njit(cache=True, inline='always', error_model='numpy')
 def h_deriv(s, ss, P, dk, dv, ds, pc, slip, delta, d, out, want):
     """Handling-model derivative, paper eqs. 12-14 (ISO axes, phi positive left up).
 
@@ -354,7 +354,7 @@ def h_deriv(s, ss, P, dk, dv, ds, pc, slip, delta, d, out, want):
         out[OH_FY0 + 3] = fy3
 
 
-@njit(cache=True, error_model='numpy', fastmath=True, parallel=True)
+@njit(cache=True, error_model='numpy', parallel=True)
 def h_integrate(states, sstates, P, dk, dv, ds, pc, slip, delta, dt, n_steps, out):
     """RK4 of the handling model; ``slip`` (4, 2n+1) and ``delta`` (2n+1,) at half steps.
 

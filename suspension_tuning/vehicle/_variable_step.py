@@ -140,11 +140,9 @@ PAIRS = {
     'bs32': (BS3_A, BS3_E, BS3_D, 4, 2),
 }
 
-# fastmath without 'nnan'/'ninf': a NaN error norm must compare as a rejected step.
-_FAST = {'nsz', 'arcp', 'contract', 'afn', 'reassoc'}
 
 
-@njit(cache=True, fastmath=_FAST)
+@njit(cache=True)
 def _emit(full_out, hist_out, bi, jj, hj, full, hist, step0, decim):
     """Store the outputs of grid point ``jj`` (every point; histories every ``decim``)."""
     if full_out.shape[2] > 0:
@@ -157,7 +155,7 @@ def _emit(full_out, hist_out, bi, jj, hj, full, hist, step0, decim):
     return hj
 
 
-@njit(cache=True, fastmath=_FAST)
+@njit(cache=True)
 def _rhs(y, out, cont, ss, uin, P, Minv, pc, dk, dv, ds, rx0, rdx, rzl, rzr, full, hist, want,
          work, C, ytab, cscr):  # fmt: skip
     """Derivative of the augmented state: ``_kernel.deriv`` plus the PI integral's rate.
@@ -178,7 +176,7 @@ def _rhs(y, out, cont, ss, uin, P, Minv, pc, dk, dv, ds, rx0, rdx, rzl, rzr, ful
     deriv(y, ss, uin, P, Minv, pc, dk, dv, ds, rx0, rdx, rzl, rzr, out, full, hist, want, work)
 
 
-@njit(cache=True, parallel=True, fastmath=_FAST)
+@njit(cache=True, parallel=True)
 def integrate_variable(
     states,
     sstates,
