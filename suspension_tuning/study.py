@@ -88,10 +88,13 @@ QUICK_GRID_POINTS = {2: 11, 4: 3}
 #: Calibration sample counts of the simplified-gradient runs [P s.6.3.1: 30;
 #: fewer are allowed if the optimum holds: 16 = the 2^4 corners for n = 4].
 CALIBRATION_SAMPLES = (30, 16)
-#: Grid points per axis of the fixed-step reference in the noisy study [E]: the smooth
-#: model's optimum is found by SLSQP polishing from the methods' final designs and the
-#: noisy reference (the smooth study's polish from its methods' points reached the dense
-#: grid's optimum in every case), so a coarse grid suffices.
+#: Grid points per axis of the fixed-step reference in the noisy study [E].  On the sett
+#: paving the tyre-hop constraints are step functions of the design: a design at the
+#: noisy model's constraint boundary is often just infeasible on the fixed-step model,
+#: and SLSQP's polish cannot cross such a step.  In the smooth study the reference came
+#: from Dynamic-Q with full-model gradients every time (grids and polish ended higher),
+#: so the fixed-step reference also starts from that method run on the fixed-step model
+#: itself, from both start points; a coarse grid then suffices.
 FIXED_REFERENCE_GRID = {2: 5, 4: 3}
 #: Designs per full-model batch of the reference grid [E: ~2 s per ride batch].
 GRID_BATCH = 64
@@ -754,8 +757,9 @@ def run_case(
     ('slsqp_best_fd', see :func:`noise_optimal_fd_step`), and the reference's polish
     uses it.  With ``fixed_reference`` (runs on the variable-step model) the reference
     optimum of the fixed-step model is found too (a :data:`FIXED_REFERENCE_GRID`
-    grid, polished from its best points and every method's final design, the noisy
-    reference's included) and every final design is run on the fixed-step model and
+    grid, polished from its best points, every method's final design, the noisy
+    reference's included, and those of Dynamic-Q with full-model gradients run on the
+    fixed-step model from every start) and every final design is run on the fixed-step model and
     compared with it.
 
     Returns
@@ -825,10 +829,18 @@ def run_case(
     fixed_ref = None
     if fixed_reference:
         finals = np.array([r.x for r, _ in runs])
+        # Dynamic-Q with full-model gradients on the fixed-step model (see
+        # FIXED_REFERENCE_GRID): its final designs are starts of the fixed reference.
+        fixed_dq = [run_dynamic_q(scenario, n_vars, start, 'full', record=False,
+                                  integrator='fixed_step')[0] for start in starts]
         fixed_ref, _ = reference_optimum(
-            scenario, n_vars, min(grid_points, FIXED_REFERENCE_GRID[n_vars]), finals,
-            record=False, integrator='fixed_step',
+            scenario, n_vars, min(grid_points, FIXED_REFERENCE_GRID[n_vars]),
+            np.vstack([finals, [r.x for r in fixed_dq]]), record=False,
+            integrator='fixed_step',
         )  # fmt: skip
+        fixed_ref.n_full_runs += sum(r.n_full_runs for r in fixed_dq)
+        fixed_ref.details['dq_full_fixed_step_f'] = [r.f for r in fixed_dq]
+        fixed_ref.message += ' and Dynamic-Q (full gradients, fixed-step model)'
         log(f'  {scenario}_{n_vars}var fixed-step reference: f = {fixed_ref.f:.6f} '
             f'({fixed_ref.n_full_runs} full runs, {fixed_ref.wall_time_s:.1f} s)')
         fixed = run_scenario(scenario, finals, n_vars=n_vars, integrator='fixed_step')
