@@ -41,9 +41,10 @@ def test_in_process_run_switches_to_handling_for_the_lane_change_and_back(in_pro
 
 
 @pytest.mark.ros
-# The step-locked run (2,880 valve periods, one DDS round trip each) takes 50 s alone,
-# and was seen to stall for a second at a time often enough, late in a full suite, to
-# pass 240 s: a slow run is reported by its duration, not failed (pytest.ini: 300 s).
+# The step-locked run (1,440 valve periods, one DDS round trip each) takes about 10 s
+# alone, but was seen to stall for a second at a time often enough on a machine loaded
+# by other work to pass 240 s: a slow run is reported by its duration, not failed
+# (pytest.ini: 300 s).
 @pytest.mark.timeout(660)
 def test_closed_loop_over_topics_gives_the_in_process_bits(ros_context, executor,
                                                            in_process):
