@@ -23,7 +23,11 @@ removed from both runs, ``graph_added_time_s``) and the time the models themselv
 take longer in the graph (other threads, ``model_time_added_s``), per service round
 trip too, the bare round trip of a service without a model (``bare_round_trip_ms``)
 and what the round trips at that cost leave of the added time
-(``graph_added_beyond_bare_calls_s``).  DDS stays on loopback with a domain of its own.
+(``graph_added_beyond_bare_calls_s``), and the transport of the evaluate and gradient
+round trips (``request_latency_ms``, ``response_latency_ms``: the median time from a
+call to its server callback's start and from the callback's end to the caller holding
+the response; ``transport_time_per_run_s``).  DDS stays on loopback with a domain of
+its own.
 """
 
 from __future__ import annotations
@@ -85,6 +89,52 @@ class ModelClock:
             seconds, self.seconds = self.seconds, 0.0
         return seconds
 
+
+
+class CallClock:
+    """Each service round trip of a graph run split into its transport and its callback.
+
+    Wraps ``_services.call_many`` (the caller's wait, one request at a time in this
+    benchmark) and the evaluate and gradient callbacks of the server nodes (before the
+    nodes are built: ``serve`` takes the bound methods then).  A round trip whose wait
+    holds exactly one callback gives the request latency (send to callback start) and
+    the response latency (callback end to the caller holding the response).
+    """
+
+    def __init__(self) -> None:
+        from suspension_tuning.nodes import _services, full_vehicle_sim, gradient_evaluator
+
+        self.waits: list[tuple[float, float]] = []
+        self.callbacks: list[tuple[float, float]] = []
+        self._lock = threading.Lock()
+        _services.call_many = self._timed(_services.call_many, self.waits)
+        for cls, name in ((full_vehicle_sim.FullVehicleSimNode, '_on_evaluate'),
+                          (gradient_evaluator.GradientEvaluatorNode, '_on_gradient')):
+            setattr(cls, name, self._timed(getattr(cls, name), self.callbacks))
+
+    def _timed(self, function, into: list):
+        def timed(*args, **kwargs):
+            start = time.perf_counter()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                end = time.perf_counter()
+                with self._lock:
+                    into.append((start, end))
+        return timed
+
+    def take(self) -> np.ndarray:
+        """(request, response) latency of each round trip since the last take, s."""
+        with self._lock:
+            waits, callbacks = self.waits[:], self.callbacks[:]
+            self.waits.clear()
+            self.callbacks.clear()
+        pairs = []
+        for start, end in waits:
+            inside = [(a, b) for a, b in callbacks if a >= start and b <= end]
+            if len(inside) == 1:
+                pairs.append((inside[0][0] - start, end - inside[0][1]))
+        return np.array(pairs).reshape(-1, 2)
 
 def in_process(options: dict) -> tuple[float, object]:
     from suspension_tuning import evaluation
@@ -188,11 +238,14 @@ def main(argv: list[str] | None = None) -> int:
 
     evaluation.evaluate(SCENARIO, np.full((1, N_VARS), 0.5))  # compile / load the kernels
     clock = ModelClock()
+    calls = CallClock()  # before the graph's nodes are built
     graph = Graph()
     # Warm-up: the first goal also starts the executor's worker threads and their
     # OpenMP thread teams (numba's parallel kernel), a one-off cost of a new graph.
     graph.run()
+    calls.take()  # the warm-up's round trips are not counted
     graph_times, local_times, graph_model, local_model = [], [], [], []
+    latencies: list[np.ndarray] = []
     for repeat in range(pairs):
         # Pairs close in time, in alternating order: the machine's speed drifts by
         # +-10 % over minutes, and whichever run goes second in a pair may differ.
@@ -202,6 +255,7 @@ def main(argv: list[str] | None = None) -> int:
                 graph_s, graph_result = graph.run()
                 graph_model.append(clock.take())
                 graph_times.append(graph_s)
+                latencies.append(calls.take())
             else:
                 local_s, local_result = in_process(graph.options)
                 local_model.append(clock.take())
@@ -229,6 +283,14 @@ def main(argv: list[str] | None = None) -> int:
     print(f'service_round_trips: {trips}')
     print(f'overhead_per_round_trip_ms: {(graph_s - local_s) / trips * 1e3:.2f}')
     print(f'bare_round_trip_ms: {bare_s * 1e3:.2f}')
+    # Transport of the evaluate and gradient round trips (request: the call sent until
+    # the server's callback starts; response: the callback's end until the caller holds
+    # the response), medians over all runs, and its total per run.
+    trips_latency = np.vstack(latencies)
+    print(f'request_latency_ms: {np.median(trips_latency[:, 0]) * 1e3:.2f}')
+    print(f'response_latency_ms: {np.median(trips_latency[:, 1]) * 1e3:.2f}')
+    print('transport_time_per_run_s: '
+          f'{np.median([lat.sum() for lat in latencies]):.4f}')
     added = [(g - gm) - (loc - lm) for g, gm, loc, lm
              in zip(graph_times, graph_model, local_times, local_model)]
     print(f'model_time_graph_s: {np.median(graph_model):.3f}')
