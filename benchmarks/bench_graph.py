@@ -50,6 +50,17 @@ import suspension_tuning.nodes  # noqa: E402, F401
 SCENARIO, N_VARS, SAMPLES, REPEATS = 'ride', 2, 30, 20
 
 
+
+def timed(function, record):
+    """``function`` wrapped to pass its entry and exit times (perf_counter, s) to ``record``."""
+    def wrapped(*args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return function(*args, **kwargs)
+        finally:
+            record(start, time.perf_counter())
+    return wrapped
+
 class ModelClock:
     """Wall time spent inside the models (full and simplified), in any thread.
 
@@ -69,26 +80,19 @@ class ModelClock:
         self._lock = threading.Lock()
         for module, name, kind in ((evaluation, 'evaluate', 'full'),
                                    (simplified, 'simplified_values', 'simplified')):
-            setattr(module, name, self._timed(getattr(module, name), kind))
+            setattr(module, name, timed(getattr(module, name),
+                                        lambda a, b, kind=kind: self._add(kind, a, b)))
 
-    def _timed(self, function, kind: str):
-        def timed(*args, **kwargs):
-            start = time.perf_counter()
-            try:
-                return function(*args, **kwargs)
-            finally:
-                end = time.perf_counter()
-                with self._lock:
-                    self.seconds += end - start
-                    self.calls.append((kind, start, end))
-        return timed
+    def _add(self, kind: str, start: float, end: float) -> None:
+        with self._lock:
+            self.seconds += end - start
+            self.calls.append((kind, start, end))
 
     def take(self) -> float:
         """Model seconds since the last call."""
         with self._lock:
             seconds, self.seconds = self.seconds, 0.0
         return seconds
-
 
 
 class CallClock:
@@ -107,21 +111,16 @@ class CallClock:
         self.waits: list[tuple[float, float]] = []
         self.callbacks: list[tuple[float, float]] = []
         self._lock = threading.Lock()
-        _services.call_many = self._timed(_services.call_many, self.waits)
+        _services.call_many = timed(_services.call_many,
+                                    lambda a, b: self._add(self.waits, a, b))
         for cls, name in ((full_vehicle_sim.FullVehicleSimNode, '_on_evaluate'),
                           (gradient_evaluator.GradientEvaluatorNode, '_on_gradient')):
-            setattr(cls, name, self._timed(getattr(cls, name), self.callbacks))
+            setattr(cls, name, timed(getattr(cls, name),
+                                     lambda a, b: self._add(self.callbacks, a, b)))
 
-    def _timed(self, function, into: list):
-        def timed(*args, **kwargs):
-            start = time.perf_counter()
-            try:
-                return function(*args, **kwargs)
-            finally:
-                end = time.perf_counter()
-                with self._lock:
-                    into.append((start, end))
-        return timed
+    def _add(self, into: list, start: float, end: float) -> None:
+        with self._lock:
+            into.append((start, end))
 
     def take(self) -> np.ndarray:
         """(request, response) latency of each round trip since the last take, s."""
