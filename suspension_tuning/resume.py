@@ -52,7 +52,7 @@ def resume(bag: str | os.PathLike[str], max_iterations: int | None = None,
                             config['gradient_source'], options, float(config['fd_step']),
                             config.get('constraints') or (),
                             # 'simulation default' (no integrator named) reads as ''
-                            integrator=config.get('integrator', '')
+                            integrator=config.get('integrator')
                             if config.get('integrator') in INTEGRATORS else '')
     last = state['history'][-1]
     counter = RunCounter(full_runs=int(last['n_full_runs']),

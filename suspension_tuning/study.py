@@ -761,8 +761,8 @@ def run_case(
     optimum of the fixed-step model is found too (a :data:`FIXED_REFERENCE_GRID`
     grid, polished from its best points, every method's final design, the noisy
     reference's included, and those of Dynamic-Q with full-model gradients run on the
-    fixed-step model from every start) and every final design is run on the fixed-step model and
-    compared with it.
+    fixed-step model from every start), and every final design is run on the
+    fixed-step model and compared with it.
 
     Returns
     -------

@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 from suspension_tuning.optim.scaling import FUNCTION_NAMES, Scaling
 from suspension_tuning.optim.simplified_gradient import load_or_calibrate, simplified_values
 from suspension_tuning.vehicle.design import X_LOWER, X_UPPER
+from suspension_tuning.vehicle.full_model import CORNERS
 from suspension_tuning.vehicle.pitch_plane import load_simplified_config
 from suspension_tuning.vehicle.scenarios import run_scenario
 from suspension_tuning.vehicle.simplified import SimplifiedInputs
@@ -257,7 +258,7 @@ def step_size_history(
             f'{scenario}: variable-step DOPRI5 at the centre design, {n} steps, '
             f'{out["rejected"]} rejected, {out["derivative_calls"]} derivative calls'
         )
-        for c, name in enumerate(('FL', 'FR', 'RL', 'RR')):
+        for c, name in enumerate(CORNERS):
             axs[1].plot(out['t_full_s'], 1e-3 * out['fz_n'][c], lw=0.6, label=name)
         axs[1].set_ylabel('tyre normal force [kN]')
         axs[1].set_xlabel('t [s]')

@@ -161,7 +161,7 @@ N_WORK = 50
 N_CTRL = 19
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline='always')
 def _hermite(v, knots, vals, slopes):
     n = knots.shape[0]
     if v <= knots[0]:
@@ -183,7 +183,7 @@ def _hermite(v, knots, vals, slopes):
     )
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline='always')
 def _pen(d, s):
     if d <= 0.0:
         return 0.0
@@ -192,7 +192,7 @@ def _pen(d, s):
     return d - 0.5 * s
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline='always')
 def _pacejka(alpha, fz, pc):
     """ISO-sign Pacejka 89 lateral force [N]; alpha rad, fz N (camber 0)."""
     if fz <= 0.0:
@@ -219,7 +219,7 @@ def _pacejka(alpha, fz, pc):
     return -(d * math.sin(c * math.atan(bx - e * (bx - math.atan(bx)))) + sv)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline='always')
 def _road(xw, x0, dx, zl, zr, side):
     """Elevation and slope of one track at distance xw (clamped at the ends)."""
     n = zl.shape[0]
