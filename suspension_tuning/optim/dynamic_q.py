@@ -56,6 +56,20 @@ published rules as recalled [R]; the analytic tests decide):
   curvatures along the rejected step (same interpolation formula, with the
   trial point in place of x^{i-1}), so the re-solved subproblem is not the
   old one in a smaller ball only.
+* Constraint curvatures from another model's slopes
+  (``surrogate_constraint_curvature``).  The interpolation formula gives
+  b_j = 2 [g_j(x^{i-1}) - g_j^i - grad g_j^i . dx] / ||dx||^2.  When g
+  comes from the full model and grad g from a simplified one, the bracket
+  holds the slope error times the step, so |b_j| grows as 1/||dx||: on the
+  4-variable ride |b| ||dx|| stayed near 2.4 (log correlation -0.97), b
+  changed sign in 14 of 28 iterations and reached the 1e3 cap, and the run
+  zig-zagged along the tyre-hop boundary.  With 'zero' the constraints are
+  linearised (b_j = c_k = 0) at iterates with such gradients; the objective
+  keeps its interpolated curvature a.
+* A run stops only after ``converge_iterations`` consecutive iterations at
+  feasible points pass the xtol or ftol test: on a noisy model one short step
+  (the subproblem's solution close to x^i) or one small change of f proves
+  nothing, and a single-step rule ended one ride run 64 % above its optimum.
 * The iterate is clipped into the bounds after each subproblem (LFOPC's
   phase 2 ends on the active bounds only to within its gradient tolerance),
   and is checked to lie inside the bounds before every evaluation.
@@ -104,6 +118,11 @@ STATUS_MESSAGES = {
 }
 """Status codes of the result (``status`` field) and their messages."""
 
+#: Values of ``DynamicQOptions.surrogate_constraint_curvature``.
+SURROGATE_CURVATURES = ('interpolate', 'zero')
+#: Gradient sources that come from another model than the values (a surrogate).
+SURROGATE_SOURCES = ('simplified',)
+
 
 @dataclass(frozen=True)
 class DynamicQOptions:
@@ -140,6 +159,20 @@ class DynamicQOptions:
     curvature_cap : float
         Curvatures are clipped to [-cap, cap]; inf disables [E: inf for
         analytic problems, 1e3 for noisy ones, physics-reference 1.2].
+    surrogate_constraint_curvature : str
+        Curvatures b_j and c_k of the constraints at an iterate whose
+        gradients came from another model than the one that gave the values
+        (source 'simplified'): 'interpolate' (Snyman and Hay's formula, as for
+        every other source) or 'zero' (linear constraint approximations).
+        The interpolation mixes the full model's values with the other
+        model's slopes: where those slopes are off, b_j absorbs the mismatch
+        divided by the step length squared, so it grows as 1/step and changes
+        sign from one iteration to the next (module notes) [E].
+    converge_iterations : int
+        Number of consecutive iterations, each at a feasible point, that must
+        pass the xtol or ftol test before the run stops; 1 stops on the first
+        [E: 1 for analytic problems; 2 for noisy ones, where one short step
+        or one lucky function change proves nothing].
     lfopc : dict
         Options of the LFOPC subproblem solver (see
         :class:`~suspension_tuning.optim.lfopc.LfopOptions`).
@@ -156,6 +189,8 @@ class DynamicQOptions:
     gtol: float = 1e-6
     maxiter: int = 100
     curvature_cap: float = math.inf
+    surrogate_constraint_curvature: str = 'interpolate'
+    converge_iterations: int = 1
     lfopc: Mapping[str, Any] | None = None
 
     def __post_init__(self) -> None:
@@ -181,6 +216,14 @@ class DynamicQOptions:
             raise ValueError(
                 f'curvature_cap must be > 0 (inf allowed), got {self.curvature_cap!r}'
             )
+        if self.surrogate_constraint_curvature not in SURROGATE_CURVATURES:
+            raise ValueError(f'surrogate_constraint_curvature must be one of '
+                             f'{", ".join(SURROGATE_CURVATURES)}, got '
+                             f'{self.surrogate_constraint_curvature!r}')
+        if int(self.converge_iterations) != self.converge_iterations or \
+                self.converge_iterations < 1:
+            raise ValueError(f'converge_iterations must be an integer >= 1, got '
+                             f'{self.converge_iterations!r}')
         LfopOptions.from_mapping(self.lfopc)
 
     @classmethod
@@ -264,6 +307,8 @@ class _Point:
     df: Array | None = None
     dg: Array | None = None
     dh: Array | None = None
+    source: str | None = None
+    iteration: int = 0
 
 
 def solve_subproblem(
@@ -471,6 +516,8 @@ class DynamicQ:
         self._reply: Any = None
         self._reply_source: str | None = None
         self._best: _Point | None = None
+        self._least_violating: _Point | None = None
+        self._converge_count = 0
         self._current: _Point | None = None
         self._rho = self.options.rho0
         if history:
@@ -557,8 +604,12 @@ class DynamicQ:
             history=list(self.history),
         )
         res.update(self._counters())
-        if self._best is not None:
-            res.update(x_best=self._best.x.copy(), f_best=self._best.f)
+        best = self._best if self._best is not None else self._least_violating
+        if best is not None:
+            res.update(x_best=best.x.copy(), f_best=best.f, g_best=best.g.copy(),
+                       h_best=best.h.copy(), best_iteration=best.iteration,
+                       best_feasible=self._best is not None,
+                       max_violation_best=_max_violation(best.g, best.h))
         return res
 
     # ---------------------------------------------------------------- private
@@ -631,8 +682,8 @@ class DynamicQ:
             )
         if not (np.all(np.isfinite(df)) and np.all(np.isfinite(dg)) and np.all(np.isfinite(dh))):
             raise ValueError(f'gradient returned non-finite values at x = {point.x}')
-        point.df, point.dg, point.dh = df, dg, dh
         source = self._reply_source or self.default_source
+        point.df, point.dg, point.dh, point.source = df, dg, dh, source
         self.ngev_by_source[source] = self.ngev_by_source.get(source, 0) + 1
         if self.history and np.array_equal(self.history[-1]['x'], point.x):
             rec = self.history[-1]
@@ -643,8 +694,14 @@ class DynamicQ:
         return _max_violation(point.g, point.h) <= self.options.gtol
 
     def _update_best(self, point: _Point) -> None:
-        if self._feasible(point) and (self._best is None or point.f < self._best.f):
-            self._best = point
+        """Keep the best feasible point, and the least violating one while none is."""
+        if self._feasible(point):
+            if self._best is None or point.f < self._best.f:
+                self._best = point
+        elif self._least_violating is None or (
+                _max_violation(point.g, point.h)
+                < _max_violation(self._least_violating.g, self._least_violating.h)):
+            self._least_violating = point
 
     def _record(
         self,
@@ -658,6 +715,7 @@ class DynamicQ:
         curvature: dict[str, Any] | None,
         subproblem: dict[str, Any] | None,
     ) -> dict[str, Any]:
+        point.iteration = len(self.history)
         rec = {
             'iteration': len(self.history),
             'x': point.x.copy(),
@@ -677,6 +735,7 @@ class DynamicQ:
             'dg': None if point.dg is None else point.dg.copy(),
             'dh': None if point.dh is None else point.dh.copy(),
             'gradient_source': None,
+            'converge_count': self._converge_count,
         }
         rec.update(self._counters())
         self.history.append(rec)
@@ -702,6 +761,8 @@ class DynamicQ:
                 p.df = np.asarray(rec['df'], dtype=float)
                 p.dg = np.asarray(rec['dg'], dtype=float).reshape(p.g.size, n)
                 p.dh = np.asarray(rec['dh'], dtype=float).reshape(p.h.size, n)
+            p.iteration = k
+            p.source = rec.get('gradient_source')
             points.append(p)
             rec['x'] = x
             records[k] = rec
@@ -715,6 +776,7 @@ class DynamicQ:
         if 'rho_next' not in last:
             raise ValueError('history: the last record lacks field rho_next (move limit)')
         self._rho = float(last['rho_next'])
+        self._converge_count = int(last.get('converge_count', 0))
         for p in points:
             self._update_best(p)
 
@@ -771,6 +833,9 @@ class DynamicQ:
                     )
                     b = _curvature(ref.g, cur.g, cur.dg, dx, dx2, cap)
                     c = _curvature(ref.h, cur.h, cur.dh, dx, dx2, cap)
+                    if (opt.surrogate_constraint_curvature == 'zero'
+                            and cur.source in SURROGATE_SOURCES):
+                        b, c = np.zeros(cur.g.size), np.zeros(cur.h.size)
                 else:
                     a, b, c = 0.0, np.zeros(cur.g.size), np.zeros(cur.h.size)
             rho = self._rho
@@ -794,6 +859,9 @@ class DynamicQ:
             accepted = not (worse and opt.worse_step == 'reject')
             df_change = abs(new.f - cur.f)
             f_scale = 1.0 + abs(cur.f)
+            small = step < opt.xtol or df_change < opt.ftol * f_scale
+            feasible_after = self._feasible(new if accepted else cur)
+            self._converge_count = self._converge_count + 1 if small and feasible_after else 0
             curvature = {'a': a, 'b': np.asarray(b).copy(), 'c': np.asarray(c).copy()}
             subinfo = {
                 'nsteps': sub.nsteps,
@@ -816,13 +884,9 @@ class DynamicQ:
                 self._current = cur
             else:
                 ref = new
-            if self._feasible(cur):
-                if step < opt.xtol:
-                    self.status = 0
-                    break
-                if df_change < opt.ftol * f_scale:
-                    self.status = 1
-                    break
+            if self._feasible(cur) and self._converge_count >= opt.converge_iterations:
+                self.status = 0 if step < opt.xtol else 1
+                break
             if opt.rho_min > 0 and self._rho < opt.rho_min:
                 self.status = 2 if self._feasible(cur) else 4
                 break
@@ -878,8 +942,12 @@ def dynamic_q(
     scipy.optimize.OptimizeResult
         x, fun (= f), g, h, success, status, message, nit (= iterations),
         nfev (calls of ``evaluate``, = n_evaluations), ngev (= njev, calls of
-        ``gradient``), ngev_by_source, max_violation, rho, history, x_best and
-        f_best (best feasible point seen).
+        ``gradient``), ngev_by_source, max_violation, rho, history.  ``x`` is the
+        last iterate, as in SciPy; the best point seen is an extra field set:
+        ``x_best``, ``f_best``, ``g_best``, ``h_best``, ``best_iteration`` and
+        ``max_violation_best``: the feasible point (largest violation <= gtol)
+        with the lowest f, or, when no point was feasible, the point with the
+        smallest violation, and ``best_feasible`` says which.
     """
     source = gradient_source or getattr(gradient, 'source', None) or 'user'
     driver = DynamicQ(
