@@ -373,7 +373,10 @@ def optimise(request: TuningRequest, full_model: FullModel,
         ``constraints`` (the extra constraints as dicts), ``constraint_values`` (their
         quantities at x, in their units) and ``constraint_gradient_sources``
         ('simplified' or 'full' each).  ``g`` holds the eq. 11 constraints, then
-        ``value - bound`` of each extra constraint.
+        ``value - bound`` of each extra constraint.  ``x`` is the last iterate; the
+        answer to report is the best point (``x_best``, ``f_best``, ``g_best``,
+        ``best_iteration``, ``best_feasible`` and ``constraint_values_best``; see
+        :func:`~suspension_tuning.optim.dynamic_q.dynamic_q`).
     """
     if request.gradient_source == 'simplified' and simplified_gradient is None:
         raise ValueError("gradient source 'simplified' needs a simplified_gradient")
@@ -402,13 +405,18 @@ def optimise(request: TuningRequest, full_model: FullModel,
             opt.stop('cancelled')
     result = opt.result()
     k = len(request.constraints)
-    extra = np.asarray(result.g, float)[len(result.g) - k:] if k else np.zeros(0)
+
+    def constraint_values(g: ArrayLike) -> list[float]:
+        extra = np.asarray(g, float)[len(g) - k:] if k else np.zeros(0)
+        return [float(v + c.upper_bound) for v, c in zip(extra, request.constraints)]
+
     result.update(counter.as_dict(), scenario=request.scenario, n_vars=n,
                   gradient_source=request.gradient_source,
                   constraints=[c.as_dict() for c in request.constraints],
-                  constraint_values=[float(v + c.upper_bound)
-                                     for v, c in zip(extra, request.constraints)],
+                  constraint_values=constraint_values(result.g),
                   constraint_gradient_sources=request.constraint_gradient_sources())
+    if 'g_best' in result:
+        result.update(constraint_values_best=constraint_values(result.g_best))
     return result
 
 
