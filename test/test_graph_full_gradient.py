@@ -88,8 +88,8 @@ def test_coordinator_action_with_full_gradients_equals_in_process(ros_context, e
         return FullEvaluation(run.f, run.g)
 
     local = optimise(TuningRequest('handling', 2, None, 'full', options), full_model)
-    np.testing.assert_array_equal(result.x, local.x)
-    assert result.f == local.f
+    np.testing.assert_array_equal(result.x, local.x_best)  # the reported (best) design
+    assert result.f == local.f_best and result.best_iteration == local.best_iteration
     assert result.n_full_runs == local.n_full_runs
     # Per iteration: one full run, plus 2n = 4 for each central-difference gradient.
     assert result.n_full_runs == local.nfev + 4 * local.ngev

@@ -84,8 +84,17 @@ def test_ride_optimisation_through_the_one_process_graph_gives_the_in_process_bi
     assert [m.feedback.phase for m in feedback].count('iteration') == len(result.history)
     assert result.n_calibration_runs == SAMPLES
     local = in_process_optimum(coordinator.options.as_dict(), SAMPLES)
-    np.testing.assert_array_equal(result.x, local.x)
-    assert result.f == local.f
+    # The result reports the in-process run's best iterate, by its iteration in the
+    # history; the last iterate stays the history's last record.
+    np.testing.assert_array_equal(result.x, local.x_best)
+    assert result.f == local.f_best
+    assert (result.best_iteration, result.feasible, result.max_violation) == (
+        local.best_iteration, local.best_feasible, local.max_violation_best)
+    best = result.history[result.best_iteration]
+    assert list(best.x) == list(result.x) and best.f == result.f
+    np.testing.assert_array_equal(result.history[-1].x, local.x)
+    assert result.message.startswith(
+        f'best feasible design: iteration {result.best_iteration}; Dynamic-Q ')
 
 
 def test_handling_optimisation_passes_the_full_runs_inputs_to_the_gradient(
@@ -108,8 +117,8 @@ def test_handling_optimisation_passes_the_full_runs_inputs_to_the_gradient(
     local = in_process_optimum(coordinator.options.as_dict(), SAMPLES, 'handling')
     assert result.iterations == local.nit
     assert result.n_simplified_runs == local.n_simplified_runs
-    np.testing.assert_array_equal(result.x, local.x)
-    assert result.f == local.f
+    np.testing.assert_array_equal(result.x, local.x_best)  # the reported (best) design
+    assert result.f == local.f_best and result.best_iteration == local.best_iteration
 
 
 def test_a_goal_is_cancelled_between_iterations(one_process_graph):
@@ -131,7 +140,8 @@ def test_a_goal_is_cancelled_between_iterations(one_process_graph):
     assert len(cancel.goals_canceling) == 1
     answer = wait_future(handle.get_result_async(), 300.0)
     assert answer.status == GoalStatus.STATUS_CANCELED
-    assert answer.result.message == 'cancelled'
+    # cancelled, and the best design of the iterations run so far reported
+    assert answer.result.message.startswith('cancelled; best feasible design: iteration ')
     # Stopped at the iteration after the cancel, not after 20.
     assert 1 <= len(answer.result.history) <= 3
     # Never on the coordinator's executor.

@@ -10,12 +10,13 @@ for the scaled simplified-model gradient, or the workers for 2n full-model centr
 differences.  Before a run with simplified gradients the gradient evaluator is
 calibrated (eq. 25, ``calibrate``) for every scenario with simplified terms.
 
-Feedback every iteration; the result holds the optimum (also in physical units), the
-history and the full-model, simplified-model and calibration run counts.  The run's
-configuration is published on ``/optimisation/run_config`` when a goal starts, every
-iteration on ``/optimisation/progress`` and the result on ``/optimisation/result``, so
-that the recorder puts one run in one bag.  The loop itself is
-:func:`suspension_tuning.tuning.optimise`, shared with in-process runs.
+Feedback every iteration; the result holds the reported design (the best feasible
+iterate, or the least violating one when none was feasible, and says which; also in
+physical units), the history and the full-model, simplified-model and calibration run
+counts.  The run's configuration is published on ``/optimisation/run_config`` when a
+goal starts, every iteration on ``/optimisation/progress`` and the result on
+``/optimisation/result``, so that the recorder puts one run in one bag.  The loop
+itself is :func:`suspension_tuning.tuning.optimise`, shared with in-process runs.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from suspension_tuning.nodes._services import ServiceCallError, SimulationPool, 
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.dynamic_q import load_options
 from suspension_tuning.paths import config_dir, dump_yaml, read_yaml
+from suspension_tuning.reported_design import reported_design, result_message
 from suspension_tuning.tuning import (
     FullEvaluation,
     RunCounter,
@@ -90,6 +92,40 @@ def record_to_msg(record: dict[str, Any], counter: RunCounter, t0: float) -> Ite
         wall_time_s=time.monotonic() - t0)
 
 
+def action_result(result: Any, history: list[IterationRecord], t0: float,
+                   counter: RunCounter) -> Optimise.Result:
+    """The action result of a :func:`~suspension_tuning.tuning.optimise` result.
+
+    x, f, g, the constraint values and the physical settings are those of the reported
+    design (:mod:`suspension_tuning.reported_design`): the best feasible iterate, or,
+    when no iterate was feasible, the least violating one, which the message and
+    ``feasible`` say plainly and which never counts as a success.  The last iterate is
+    the history's last record.
+    """
+    design = reported_design(result)
+    stop = str(result.message)
+    if design is None:  # no point evaluated: the start point, unevaluated
+        x = np.asarray(result.x, float).tolist()
+        physical = physical_settings(x)
+        return Optimise.Result(
+            success=False, message=stop, x=x,
+            constraint_gradient_sources=list(result.constraint_gradient_sources),
+            physical_names=list(physical), physical_values=list(physical.values()),
+            iterations=int(result.get('nit', 0)), history=history,
+            wall_time_s=time.monotonic() - t0, **counter.as_dict())
+    physical = physical_settings(design.x)
+    return Optimise.Result(
+        success=bool(result.success) and design.feasible,
+        message=result_message(design, stop),
+        x=design.x, f=design.f, g=design.g, feasible=design.feasible,
+        best_iteration=design.iteration, max_violation=design.max_violation,
+        constraint_values=design.constraint_values,
+        constraint_gradient_sources=list(result.constraint_gradient_sources),
+        physical_names=list(physical), physical_values=list(physical.values()),
+        iterations=int(result.nit), history=history, wall_time_s=time.monotonic() - t0,
+        **counter.as_dict())
+
+
 class CoordinatorNode(Node):
     """Action server ``optimise`` over the simulation workers and gradient evaluator.
 
@@ -112,7 +148,7 @@ class CoordinatorNode(Node):
         self.declare_parameter('fd_step', 0.025)
         self.declare_parameter('optimiser_config', '')
         self.declare_parameter('optimiser_section', 'vehicle')
-        # One more full run at the optimum, publishing its telemetry for the bag; a
+        # One more full run at the reported design, publishing its telemetry for the bag; a
         # recording run, not part of the optimisation's run counts.
         self.declare_parameter('final_telemetry', True)
         # Seconds a goal's result is kept for late result requests after the goal ends
@@ -349,25 +385,21 @@ class CoordinatorNode(Node):
                                       wall_time_s=time.monotonic() - t0, **counter.as_dict())
             self.result_pub.publish(message)
             return message
-        physical = physical_settings(result.x)
-        if self.get_parameter('final_telemetry').value and not goal_handle.is_cancel_requested:
+        message = action_result(result, history_msgs, t0, counter)
+        design = reported_design(result)
+        if (design is not None and self.get_parameter('final_telemetry').value
+                and not goal_handle.is_cancel_requested):
             try:
-                self.pool.evaluate(request.scenario, request.n_vars, result.x[None, :],
+                self.pool.evaluate(request.scenario, request.n_vars,
+                                   np.asarray(design.x, float)[None, :],
                                    publish_telemetry=True, integrator=request.integrator)
             except (ValueError, ServiceCallError) as error:
-                self.get_logger().warning(f'telemetry run of the optimum failed: {error}')
-        message = Optimise.Result(
-            success=bool(result.success), message=str(result.message),
-            x=np.asarray(result.x, float).tolist(), f=float(result.f),
-            g=np.asarray(result.g, float).tolist(),
-            constraint_values=list(result.constraint_values),
-            constraint_gradient_sources=list(result.constraint_gradient_sources),
-            physical_names=list(physical),
-            physical_values=list(physical.values()), iterations=int(result.nit),
-            history=history_msgs, wall_time_s=time.monotonic() - t0, **counter.as_dict())
+                self.get_logger().warning(f'telemetry run of the reported design failed: '
+                                          f'{error}')
+        message.wall_time_s = time.monotonic() - t0
         if goal_handle.is_cancel_requested:
             goal_handle.canceled()
-            message.message = 'cancelled'
+            message.message = 'cancelled' if design is None else f'cancelled; {design.statement}'
         else:
             goal_handle.succeed()
         self.result_pub.publish(message)
