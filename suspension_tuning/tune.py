@@ -11,9 +11,10 @@ Extra constraints from another scenario or a named metric::
 Prints the eq. 25 calibration's progress (full-model samples done of total; the first
 run of a model configuration spends them before its first iteration), then one line
 per Dynamic-Q iteration (iteration, f, largest violation, model runs so far) from the
-action's feedback, then the result with the optimum in physical
-units (damper scale factor, gas volume in litres).  Ctrl-C cancels the goal and exits
-with status 130.
+action's feedback, then the result: the best feasible design seen as the optimum, with
+its iteration, in physical units (damper scale factor, gas volume in litres), or, when
+no iterate was feasible, "no feasible design found" and the least violating one.
+Ctrl-C cancels the goal and exits with status 130.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from suspension_tuning_interfaces.action import Optimise
 from suspension_tuning_interfaces.msg import Constraint
 
 from suspension_tuning.nodes._spin import wait_future
+from suspension_tuning.reported_design import statement
 from suspension_tuning.tuning import ConstraintSpec
 
 
@@ -77,19 +79,39 @@ def format_feedback(feedback: Optimise.Feedback) -> str:
 
 
 def format_result(result) -> str:
-    """Format the action result as a report, physical units at the edge."""
-    lines = [f'success: {result.success}', f'message: {result.message}',
-             f'f: {result.f:.6f}', 'x: [' + ', '.join(f'{v:.4f}' for v in result.x) + ']',
-             'g: [' + ', '.join(f'{v:.4f}' for v in result.g) + ']',
-             *(f'constraint {i}: value {value:.6g} (gradient: {source})' for i, (value, source)
-               in enumerate(zip(result.constraint_values,
-                                result.constraint_gradient_sources))),
-             f'iterations: {result.iterations}', f'full-model runs: {result.n_full_runs}',
-             f'simplified-model runs: {result.n_simplified_runs}',
-             f'calibration full-model runs: {result.n_calibration_runs}',
-             f'wall time: {result.wall_time_s:.1f} s', 'optimum in physical units:']
-    lines += [f'  {name}: {value:.4g}'
-              for name, value in zip(result.physical_names, result.physical_values)]
+    """Format the action result as a report, physical units at the edge.
+
+    The design reported is the result's: the best feasible iterate, shown as the
+    optimum with its iteration, or, when no iterate was feasible, the least violating
+    one under a plain "no feasible design found".  The last iterate follows when it is
+    another one.
+    """
+    lines = [f'success: {result.success}', f'message: {result.message}']
+    design = len(result.x) > 0 and len(result.history) > 0  # else failed before an iterate
+    if design:
+        if result.feasible:
+            lines.append(f'optimum: the best feasible design, iteration '
+                         f'{result.best_iteration} (max violation {result.max_violation:.4g})')
+        else:
+            lines.append(statement(False, result.best_iteration, result.max_violation))
+        lines += [f'f: {result.f:.6f}', 'x: [' + ', '.join(f'{v:.4f}' for v in result.x) + ']',
+                  'g: [' + ', '.join(f'{v:.4f}' for v in result.g) + ']',
+                  *(f'constraint {i}: value {value:.6g} (gradient: {source})'
+                    for i, (value, source) in enumerate(
+                        zip(result.constraint_values, result.constraint_gradient_sources)))]
+        last = result.history[-1]
+        if last.iteration != result.best_iteration:
+            lines.append(f'last iterate: iteration {last.iteration}, f = {last.f:.6f}, '
+                         f'max violation {last.max_violation:.4g}')
+    lines += [f'iterations: {result.iterations}', f'full-model runs: {result.n_full_runs}',
+              f'simplified-model runs: {result.n_simplified_runs}',
+              f'calibration full-model runs: {result.n_calibration_runs}',
+              f'wall time: {result.wall_time_s:.1f} s']
+    if design:
+        lines.append('optimum in physical units:' if result.feasible else
+                     'least violating design in physical units (not feasible):')
+        lines += [f'  {name}: {value:.4g}'
+                  for name, value in zip(result.physical_names, result.physical_values)]
     return '\n'.join(lines)
 
 

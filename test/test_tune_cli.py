@@ -34,6 +34,40 @@ def test_tune_prints_progress_and_the_physical_optimum(ros_context, executor):
     assert 'full-model runs:' in out
 
 
+def _result(feasible: bool, best_iteration: int, max_violation: float):
+    """An action result of three iterations whose design is that of ``best_iteration``."""
+    from suspension_tuning_interfaces.action import Optimise
+    from suspension_tuning_interfaces.msg import IterationRecord
+
+    history = [IterationRecord(iteration=k, f=1.0 - 0.25 * k) for k in range(3)]
+    return Optimise.Result(
+        success=feasible, message='...', x=[0.5, 0.5], f=history[best_iteration].f,
+        g=[max_violation - 0.5, max_violation], feasible=feasible,
+        best_iteration=best_iteration, max_violation=max_violation,
+        physical_names=['dpsf_front', 'gas_volume_front_l'], physical_values=[1.5, 0.35],
+        iterations=2, history=history)
+
+
+def test_tune_prints_the_best_feasible_design_as_the_optimum_with_its_iteration():
+    from suspension_tuning.tune import format_result
+
+    text = format_result(_result(True, 1, 0.0))  # iteration 1 best, 2 last (infeasible)
+    assert 'optimum: the best feasible design, iteration 1 (max violation 0)' in text
+    assert 'f: 0.750000' in text  # history[1].f = 1 - 0.25
+    assert 'last iterate: iteration 2, f = 0.500000' in text
+    assert 'optimum in physical units:' in text and 'dpsf_front: 1.5' in text
+
+
+def test_tune_says_plainly_when_no_design_was_feasible():
+    from suspension_tuning.tune import format_result
+
+    text = format_result(_result(False, 0, 0.25))  # iteration 0 violates least, g = 0.25
+    assert ('no feasible design found: the reported design is the least violating one '
+            '(max g = 0.25), iteration 0') in text
+    assert 'optimum' not in text
+    assert 'least violating design in physical units (not feasible):' in text
+
+
 def test_tune_sends_constraints_from_the_command_line(ros_context, executor):
     _serve_coordinator(ros_context, executor)
     tune = Path(sys.prefix) / 'bin' / 'tune'
