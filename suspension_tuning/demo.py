@@ -4,8 +4,9 @@ Starts the graph (simulation worker, gradient evaluator, valve controller, coord
 recorder) in this process on loopback DDS, then runs the 4-variable ride optimisation
 and the 4-variable handling optimisation with simplified-model gradients (each starts
 with the eq. 25 calibration from 30 full-model samples, cached across runs).  Prints the
-progress of each iteration, the optimum settings in physical units beside the baseline
-vehicle, where the bags are and the plots written from them, and the wall time.
+progress of each iteration, the best feasible design seen (or says plainly that none
+was feasible) in physical units beside the baseline vehicle, where the bags are and
+the plots written from them, and the wall time.
 """
 
 from __future__ import annotations
@@ -37,31 +38,40 @@ def baseline_design(n_vars: int) -> np.ndarray:
 
 
 def optimiser_stopped(message: str) -> bool:
-    """True if a goal's result message is one of Dynamic-Q's own stops.
+    """True if a goal's result message ends in one of Dynamic-Q's own stops.
 
     An optimisation that converged or stopped on its own criteria (iteration limit, move
     limit; possibly at an infeasible point) is a result the demo reports; anything else
-    (a bad goal, a failed evaluation, ROS shutting down) is a failure of the demo.
+    (a bad goal, a failed evaluation, ROS shutting down) is a failure of the demo.  The
+    message may start with the sentence on the reported design
+    (:func:`suspension_tuning.reported_design.result_message`).
     """
     from suspension_tuning.optim.dynamic_q import STATUS_MESSAGES
+    from suspension_tuning.reported_design import stop_message
 
     own = {STATUS_MESSAGES[k] for k in STATUS_MESSAGES if k != 99}
-    return message.removesuffix(' (final point infeasible)') in own
+    return stop_message(message).removesuffix(' (final point infeasible)') in own
 
 
 def report(scenario: str, result, baseline_f: float, baseline_x: np.ndarray) -> str:
-    """The optimum beside the baseline, in physical units."""
+    """The reported design (the best feasible one seen) beside the baseline, physical units.
+
+    When no iterate was feasible the report says so plainly and shows the least
+    violating design in the column of the optimum.
+    """
     from suspension_tuning.tuning import physical_settings
 
     base = physical_settings(baseline_x)
-    lines = [f'{scenario}: {result.message}',
-             f'  {"setting":<22}{"baseline":>10}{"optimum":>10}']
+    column, w = ('optimum', 10) if result.feasible else ('least violating', 17)
+    lines = [f'{scenario}: {result.message}',  # which iteration, or that none was feasible
+             f'  {"setting":<22}{"baseline":>10}{column:>{w}}']
     for name, value in zip(result.physical_names, result.physical_values):
-        lines.append(f'  {name:<22}{base[name]:>10.3f}{value:>10.3f}')
+        lines.append(f'  {name:<22}{base[name]:>10.3f}{value:>{w}.3f}')
     gain = 100.0 * (baseline_f - result.f) / abs(baseline_f) if baseline_f else float('nan')
-    lines.append(f'  {"objective f":<22}{baseline_f:>10.4f}{result.f:>10.4f}'
+    lines.append(f'  {"objective f":<22}{baseline_f:>10.4f}{result.f:>{w}.4f}'
                  f'   (improvement {gain:.1f} %)')
-    lines.append(f'  largest constraint g  {max(result.g):.3f} (<= 0 feasible, eq. 11)')
+    lines.append(f'  largest constraint g  {max(result.g, default=0.0):.3f} (<= 0 feasible, '
+                 f'eq. 11)')
     lines.append(f'  iterations {result.iterations}, full-model runs {result.n_full_runs}, '
                  f'simplified runs {result.n_simplified_runs}, calibration runs '
                  f'{result.n_calibration_runs or "0 (eq. 25 scaling from the cache)"}, '

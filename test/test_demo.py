@@ -1,4 +1,7 @@
-"""The demo's exit status: an optimiser's own stop is a result, anything else a failure."""
+"""The demo: its exit status (an optimiser's own stop is a result, anything else a failure)
+and its report of the reported design."""
+
+import numpy as np
 
 from suspension_tuning.demo import optimiser_stopped
 
@@ -15,3 +18,35 @@ def test_demo_reports_an_optimiser_stop_and_fails_on_anything_else():
     assert not optimiser_stopped('stopped by the callback or the caller')
     assert not optimiser_stopped('bad goal: n_vars must be 2 or 4')
     assert not optimiser_stopped('stopped: ROS shut down under the goal')
+
+
+def test_demo_reads_the_optimiser_stop_after_the_sentence_on_the_reported_design():
+    # the coordinator's result message: the reported design, then Dynamic-Q's stop
+    assert optimiser_stopped('best feasible design: iteration 29; Dynamic-Q stopped: '
+                             'maximum number of iterations reached (final point infeasible)')
+    assert optimiser_stopped('no feasible design found: the reported design is the least '
+                             'violating one (max g = 0.0444), iteration 4; Dynamic-Q '
+                             'stopped: move limit below rho_min at an infeasible point')
+    assert not optimiser_stopped('best feasible design: iteration 3; Dynamic-Q cancelled')
+
+
+def test_demo_report_says_when_no_design_was_feasible():
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning.demo import report
+
+    names = ['dpsf_front', 'gas_volume_front_l', 'dpsf_rear', 'gas_volume_rear_l']
+    # an infeasible reported design: the tyre-hop constraint of FL 0.0444 above 0
+    result = Optimise.Result(
+        success=False, message='no feasible design found: the reported design is the least '
+        'violating one (max g = 0.0444), iteration 4; Dynamic-Q stopped: maximum number of '
+        'iterations reached (final point infeasible)', x=[0.5, 0.5, 0.5, 0.5], f=0.1,
+        g=[0.0444, -0.1, -0.1, -0.1], feasible=False, best_iteration=4, max_violation=0.0444,
+        physical_names=names, physical_values=[1.5, 0.35, 1.5, 0.35], iterations=30)
+    base_x = np.full(4, 0.5005)  # the centre; only its physical settings are printed
+    text = report('ride', result, 0.2, base_x)  # baseline f 0.2: improvement 50 %
+    assert 'ride: no feasible design found' in text
+    assert 'least violating' in text.splitlines()[1] and 'optimum' not in text
+    assert '(improvement 50.0 %)' in text
+    result.feasible, result.message = True, 'best feasible design: iteration 4; Dynamic-Q ...'
+    assert 'optimum' in report('ride', result, 0.2, base_x).splitlines()[1]
