@@ -8,15 +8,18 @@
 * the optimisation, if ``/optimisation/progress`` (IterationRecord) and/or
   ``/optimisation/result`` (Optimise_Result) are present: the iteration table
   (iteration, f, largest violation, move limit, full and simplified runs, x), the
-  optimum (x, f, g, physical values), the evaluation counts, and the requests seen on
-  the service-event topics;
+  reported design (x, f, g, physical values): the best feasible iterate with its
+  iteration, or, saying so plainly, the least violating one when none was feasible
+  (for a result recorded before results named it: found in the recorded history), the
+  evaluation counts, and the requests seen on the service-event topics;
 * valve switching events from ``/suspension/valve_command`` and
   ``/suspension/valve_state``: the simulated time of each change of the commanded
   state and the delay until the actual state reached it (paper section 3: 50-100 ms).
 
 ``--plots DIR`` writes PNG files: ``convergence.png`` (f and the largest violation vs
-iteration), ``design.png`` (each x component vs iteration, and the x1-x2 plane),
-``telemetry.png`` (the last run's ``/<sim>/telemetry/*`` streams vs simulated time).
+iteration, the reported design marked), ``design.png`` (each x component vs iteration,
+and the x1-x2 plane with the reported design and the last iterate), ``telemetry.png``
+(the last run's ``/<sim>/telemetry/*`` streams vs simulated time).
 
 :func:`last_iteration` returns what :class:`suspension_tuning.optim.dynamic_q.DynamicQ`
 needs to resume the optimisation (``history=``).  Everything here is plain Python
@@ -89,8 +92,8 @@ def iterations(contents: BagContents) -> list[dict[str, Any]]:
             records = [_record(f.latest) for f in decoded
                        if getattr(f, 'phase', 'iteration') != 'calibration']
         else:
-            result = optimum(contents)
-            records = result['history'] if result else []
+            result = _result_message(contents)
+            records = [_record(r) for r in result.history] if result is not None else []
     start = 0
     for k in range(1, len(records)):
         if records[k]['iteration'] <= records[k - 1]['iteration']:
@@ -98,18 +101,57 @@ def iterations(contents: BagContents) -> list[dict[str, Any]]:
     return records[start:]
 
 
-def optimum(contents: BagContents) -> dict[str, Any] | None:
-    """The last ``/optimisation/result`` as a dict (None if the bag has none)."""
+def _result_message(contents: BagContents) -> Any:
+    """The last ``/optimisation/result`` message, decoded (None if the bag has none)."""
     messages = contents.on(RESULT_TOPIC)
-    if not messages:
+    return decode(contents, messages[-1]) if messages else None
+
+
+def _run_config(contents: BagContents) -> dict[str, Any] | None:
+    """The bag's ``run_config`` metadata record as a dict (None without one)."""
+    text = contents.metadata.get('run_config', {}).get('yaml', '')
+    config = yaml.safe_load(text) if text else None
+    return config if isinstance(config, dict) else None
+
+
+def run_gtol(config: dict[str, Any] | None) -> float:
+    """Feasibility tolerance of a recorded run: its optimiser options' gtol.
+
+    0 (only designs that violate no constraint at all are feasible) when the run
+    configuration does not say.
+    """
+    options = (config or {}).get('optimiser_options') or {}
+    gtol = options.get('gtol')
+    return float(gtol) if gtol is not None else 0.0
+
+
+def optimum(contents: BagContents) -> dict[str, Any] | None:
+    """The last ``/optimisation/result`` as a dict (None if the bag has none).
+
+    x, f, g and the physical values are the reported design: the best feasible
+    iterate of the run, or the least violating one when none was feasible
+    (``feasible``), of iteration ``best_iteration``, with ``max_violation``;
+    ``source`` says where it comes from: 'result' (the result names it), or
+    'history' for a result recorded before results named their best design, whose x
+    is the last iterate: then the design is found in the recorded history by
+    Dynamic-Q's rule, with the run's gtol (:func:`run_gtol`), and ``gtol`` says
+    which.  A result without a design (a failed run) has ``best_iteration`` None.
+    ``last_iterate``: iteration, x, f and max_violation of the run's last record.
+    """
+    msg = _result_message(contents)
+    if msg is None:
         return None
-    msg = decode(contents, messages[-1])
-    return {
+    history = [_record(r) for r in msg.history]
+    out = {
         'success': bool(msg.success),
         'message': str(msg.message),
         'x': [float(v) for v in msg.x],
         'f': float(msg.f),
         'g': [float(v) for v in msg.g],
+        'feasible': bool(getattr(msg, 'feasible', False)),
+        'best_iteration': int(getattr(msg, 'best_iteration', 0)),
+        'max_violation': float(getattr(msg, 'max_violation', math.nan)),
+        'source': 'result',
         'physical': dict(
             zip([str(n) for n in msg.physical_names], [float(v) for v in msg.physical_values])
         ),
@@ -117,9 +159,35 @@ def optimum(contents: BagContents) -> dict[str, Any] | None:
         'n_full_runs': int(msg.n_full_runs),
         'n_simplified_runs': int(msg.n_simplified_runs),
         'n_calibration_runs': int(msg.n_calibration_runs),
-        'history': [_record(r) for r in msg.history],
+        'history': history,
         'wall_time_s': float(msg.wall_time_s),
     }
+    records = history or iterations(contents)
+    if not out['x']:  # the run failed before it had a design to report
+        out.update(feasible=False, best_iteration=None, max_violation=None)
+    elif not hasattr(msg, 'best_iteration'):
+        out.update(_best_of_history(records, run_gtol(_run_config(contents))))
+    last = records[-1] if records else None
+    out['last_iterate'] = None if last is None else {
+        k: last[k] for k in ('iteration', 'x', 'f', 'max_violation')}
+    return out
+
+
+def _best_of_history(records: list[dict[str, Any]], gtol: float) -> dict[str, Any]:
+    """The reported-design fields of :func:`optimum` from recorded iterates."""
+    from suspension_tuning.reported_design import best_record
+    from suspension_tuning.tuning import physical_settings
+
+    found = best_record(records, gtol)
+    if found is None:
+        return {'feasible': False, 'best_iteration': None, 'max_violation': None,
+                'source': 'history', 'gtol': gtol}
+    k, feasible = found
+    best = records[k]
+    return {'x': list(best['x']), 'f': best['f'], 'g': list(best['g']),
+            'feasible': feasible, 'best_iteration': best['iteration'],
+            'max_violation': best['max_violation'], 'source': 'history', 'gtol': gtol,
+            'physical': physical_settings(best['x'])}
 
 
 def service_requests(contents: BagContents) -> dict[str, dict[str, int]]:
@@ -311,6 +379,11 @@ def write_plots(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]) -
     out.mkdir(parents=True, exist_ok=True)
     contents = read_messages(path)
     records = iterations(contents)
+    result = optimum(contents)
+    # the reported design: the best feasible iterate, else the least violating one
+    best = result if result and result['best_iteration'] is not None else None
+    label = ('reported: best feasible' if best and best['feasible']
+             else 'reported: least violating (none feasible)')
     written = []
     if records:
         k = [r['iteration'] for r in records]
@@ -320,6 +393,12 @@ def write_plots(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]) -
         ax_g.plot(k, [r['max_violation'] for r in records], 's-', color='tab:red')
         ax_g.set_ylabel('largest violation max(0, g)')
         ax_g.set_xlabel('iteration')
+        if best:
+            ax_f.plot(best['best_iteration'], best['f'], '*', markersize=14,
+                      color='tab:green', label=label)
+            ax_g.plot(best['best_iteration'], best['max_violation'], '*', markersize=14,
+                      color='tab:green', label=label)
+            ax_f.legend()
         fig.suptitle('Dynamic-Q convergence')
         fig.tight_layout()
         fig.savefig(out / 'convergence.png', dpi=100)
@@ -334,7 +413,11 @@ def write_plots(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]) -
         ax_k.legend()
         if x.shape[1] >= 2:
             ax_p.plot(x[:, 0], x[:, 1], 'o-')
-            ax_p.plot(x[-1, 0], x[-1, 1], '*', markersize=14, color='tab:green', label='last')
+            ax_p.plot(x[-1, 0], x[-1, 1], 'X', markersize=10, color='tab:gray',
+                      label='last iterate')
+            if best and len(best['x']) == x.shape[1]:
+                ax_p.plot(best['x'][0], best['x'][1], '*', markersize=14, color='tab:green',
+                          label=label)
             ax_p.set_xlabel('x1')
             ax_p.set_ylabel('x2')
             ax_p.set_xlim(0, 1)
@@ -397,6 +480,33 @@ def write_plots(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]) -
 
 
 # ------------------------------------------------------------------------ CLI
+def _format_optimum(best: dict[str, Any]) -> list[str]:
+    """Text lines of the reported design: the best feasible one, or plainly none."""
+    from suspension_tuning.reported_design import statement
+
+    state = 'success' if best['success'] else 'FAILED'
+    k = best['best_iteration']
+    if k is None:
+        return [f'result ({state}: {best["message"]}): no design reported']
+    title = 'optimum' if best['feasible'] else 'reported design'
+    lines = [f'{title} ({state}: {best["message"]}):',
+             f'  {statement(best["feasible"], k, best["max_violation"])}'
+             + (f' (max violation {best["max_violation"]:.4g})' if best['feasible'] else '')]
+    if best['source'] == 'history':
+        lines += [f'  (found in the recorded history with gtol = {best["gtol"]:g}: the result',
+                  '  was recorded before results named their best design)']
+    lines.append(f'  x = {best["x"]}')
+    lines.append(f'  f = {best["f"]!r}')
+    lines.append(f'  g = {best["g"]}')
+    for name, value in best['physical'].items():
+        lines.append(f'  {name} = {value:g}')
+    last = best.get('last_iterate')
+    if last and last['iteration'] != k:
+        lines.append(f'  last iterate: iteration {last["iteration"]}, f = {last["f"]!r}, '
+                     f'max violation {last["max_violation"]:.4g}')
+    return lines
+
+
 def _format(info: dict[str, Any]) -> str:
     lines = [
         f'bag: {info["bag"]}  ({"complete" if info["complete"] else "TRUNCATED: "}'
@@ -424,14 +534,7 @@ def _format(info: dict[str, Any]) -> str:
             )
         best = info.get('optimum')
         if best:
-            lines.append(
-                f'optimum ({"success" if best["success"] else "FAILED"}: {best["message"]}):'
-            )
-            lines.append(f'  x = {best["x"]}')
-            lines.append(f'  f = {best["f"]!r}')
-            lines.append(f'  g = {best["g"]}')
-            for name, value in best['physical'].items():
-                lines.append(f'  {name} = {value:g}')
+            lines += _format_optimum(best)
         ev = info['evaluations']
         lines.append(
             f'evaluations: iterations {ev["iterations"]}, full-model runs '
@@ -482,6 +585,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         for path in write_plots(args.bag, args.plots):
             print(f'plot: {path}', file=sys.stderr)
     if args.resume:
+        from suspension_tuning.reported_design import reported_design
         from suspension_tuning.resume import resume
         from suspension_tuning.tuning import physical_settings
 
@@ -490,12 +594,29 @@ def main(argv: Sequence[str] | None = None) -> int:
         except ValueError as exc:
             print(f'inspect_bag: cannot resume: {exc}', file=sys.stderr)
             return 2
-        print(f'resumed: {result.message}; iterations {result.nit}, f = {result.f:.6g}, '
-              f'x = {[round(float(v), 4) for v in result.x]}, full-model runs '
-              f'{result.n_full_runs}, simplified runs {result.n_simplified_runs}')
-        for name, value in physical_settings(result.x).items():
-            print(f'  {name}: {value:.4g}')
+        print(format_resumed(result))
+        design = reported_design(result)
+        if design is not None:
+            for name, value in physical_settings(design.x).items():
+                print(f'  {name}: {value:.4g}')
     return 0
+
+
+def format_resumed(result: Any) -> str:
+    """One line on a resumed run: its stop, the reported design and the run counts.
+
+    The design is the best feasible one over the whole run (the bag's iterations and
+    the new ones), or, saying so plainly, the least violating one.
+    """
+    from suspension_tuning.reported_design import reported_design
+
+    design = reported_design(result)
+    counts = (f'iterations {result.get("nit", 0)}, full-model runs {result.n_full_runs}, '
+              f'simplified runs {result.n_simplified_runs}')
+    if design is None:
+        return f'resumed: {result.message}; no iterate evaluated; {counts}'
+    return (f'resumed: {result.message}; {design.statement}: f = {design.f:.6g}, '
+            f'x = {[round(v, 4) for v in design.x]}; {counts}')
 
 
 if __name__ == '__main__':

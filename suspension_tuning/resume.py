@@ -36,6 +36,13 @@ def resume(bag: str | os.PathLike[str], max_iterations: int | None = None,
     callback : callable, optional
         As for :func:`suspension_tuning.tuning.optimise`.
 
+    Returns
+    -------
+    scipy.optimize.OptimizeResult
+        :func:`suspension_tuning.tuning.optimise`'s result: ``x`` is the last iterate;
+        the design to report is the best one over the whole run, the bag's iterations
+        included (``x_best`` ..., :func:`suspension_tuning.reported_design.reported_design`).
+
     Raises
     ------
     ValueError

@@ -1,6 +1,7 @@
 """inspect_bag: the numbers it reports are the ones in the bag's messages, exactly."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -142,6 +143,9 @@ def build_bag(path):
             x=RECORDS[-1]['x'],
             f=RECORDS[-1]['f'],
             g=RECORDS[-1]['g'],
+            feasible=True,  # the last record is the best feasible one: lowest f, g <= 0
+            best_iteration=3,
+            max_violation=0.0,
             physical_names=list(PHYSICAL),
             physical_values=list(PHYSICAL.values()),
             iterations=3,
@@ -194,6 +198,7 @@ def test_iteration_table_and_optimum_equal_the_messages_exactly(bag):
     assert best['g'] == RECORDS[-1]['g']
     assert best['physical'] == PHYSICAL
     assert best['success'] and best['message'] == 'converged'
+    assert best['feasible'] and best['best_iteration'] == 3 and best['source'] == 'result'
     ev = info['evaluations']
     assert (
         ev['iterations'],
@@ -203,6 +208,113 @@ def test_iteration_table_and_optimum_equal_the_messages_exactly(bag):
     ) == (3, 4, 16, 30)
     # 2 requests received, with 1 and 3 designs
     assert ev['services'] == {'/sim_0/evaluate': {'requests': 2, 'designs': 4}}
+
+
+def _optimisation_bag(path, records, **result):
+    """A bag of one run: run_config (gtol 1e-3), progress records and the result."""
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+    from suspension_tuning_interfaces.action import Optimise
+    from suspension_tuning_interfaces.msg import IterationRecord
+
+    from suspension_tuning.bag.writer import BagWriter
+
+    config = 'scenario: ride\nn_vars: 2\noptimiser_options: {gtol: 0.001}\n'
+    with BagWriter(path) as bag:
+        bag.add_metadata('run_config', {'yaml': config})
+        bag.add_topic('/optimisation/run_config', 'std_msgs/msg/String')
+        bag.write('/optimisation/run_config', serialize_message(String(data=config)), T0)
+        bag.add_topic('/optimisation/progress', 'suspension_tuning_interfaces/msg/IterationRecord')
+        for k, rec in enumerate(records):
+            bag.write('/optimisation/progress', serialize_message(IterationRecord(**rec)),
+                      T0 + 1 + k)
+        bag.add_topic('/optimisation/result',
+                      'suspension_tuning_interfaces/action/Optimise_Result')
+        message = Optimise.Result(history=[IterationRecord(**r) for r in records], **result)
+        bag.write('/optimisation/result', serialize_message(message), T0 + 1 + len(records))
+    return path
+
+
+#: A run whose last iterate (3) has the lowest f but violates a constraint; iteration
+#: 2 is the best feasible one.
+INFEASIBLE_LAST = [*RECORDS[:3], dict(RECORDS[3], f=1.0, g=[0.0625, -1.0],
+                                      max_violation=0.0625)]
+
+
+def test_inspect_shows_the_reported_design_and_its_iteration_not_the_last(tmp_path, capsys):
+    from suspension_tuning.inspect_bag import main, summary, write_plots
+
+    best = INFEASIBLE_LAST[2]
+    bag = _optimisation_bag(
+        tmp_path / 'run', INFEASIBLE_LAST, success=False, x=best['x'], f=best['f'],
+        g=best['g'], feasible=True, best_iteration=2, max_violation=0.0, iterations=3,
+        message='best feasible design: iteration 2; Dynamic-Q stopped: maximum number of '
+        'iterations reached (final point infeasible)', physical_names=list(PHYSICAL),
+        physical_values=list(PHYSICAL.values()))
+    info = summary(bag)
+    optimum = info['optimum']
+    assert (optimum['x'], optimum['f'], optimum['best_iteration']) == (best['x'], 1.25, 2)
+    assert optimum['feasible'] and optimum['source'] == 'result'
+    assert optimum['last_iterate']['iteration'] == 3 and optimum['last_iterate']['f'] == 1.0
+    assert main([str(bag)]) == 0
+    text = capsys.readouterr().out
+    assert 'best feasible design: iteration 2 (max violation 0)' in text
+    assert 'f = 1.25' in text and 'last iterate: iteration 3, f = 1.0' in text
+    assert main([str(bag), '--json']) == 0
+    assert json.loads(capsys.readouterr().out)['optimum']['best_iteration'] == 2
+    # the reported design is marked on both; no telemetry in this bag
+    assert {p.name for p in write_plots(bag, tmp_path / 'plots')} == {
+        'convergence.png', 'design.png'}
+
+
+def test_inspect_says_plainly_when_no_design_was_feasible(tmp_path, capsys):
+    from suspension_tuning.inspect_bag import main
+
+    # every record violates a constraint: iteration 1 the least (0.0625, as in RECORDS),
+    # the others by 0.5
+    records = [dict(r, max_violation=0.5) for r in RECORDS]
+    records[1] = RECORDS[1]
+    bag = _optimisation_bag(
+        tmp_path / 'run', records, x=RECORDS[1]['x'], f=RECORDS[1]['f'], g=RECORDS[1]['g'],
+        feasible=False, best_iteration=1, max_violation=0.0625, iterations=3,
+        message='no feasible design found: ...', physical_names=list(PHYSICAL),
+        physical_values=list(PHYSICAL.values()))
+    assert main([str(bag)]) == 0
+    text = capsys.readouterr().out
+    assert 'reported design (FAILED' in text and 'optimum' not in text
+    assert ('no feasible design found: the reported design is the least violating one '
+            '(max g = 0.0625), iteration 1') in text
+
+
+#: An old bag: the run_config, progress and result messages of a 4-variable ride run
+#: of make demo (bags/sample), recorded before results named their best design.  Its
+#: last iterate (30, max violation 0.0444) is infeasible; iteration 29 has the lowest
+#: f (0.11316) among those within gtol = 1e-3 (its max violation 7.4e-4).
+OLD_RESULT = Path(__file__).parent / 'fixtures' / 'old_result_ride'
+
+
+def test_an_old_bag_reports_the_best_feasible_design_found_in_its_history(tmp_path, capsys):
+    from suspension_tuning.bag.reader import decode, read_messages
+    from suspension_tuning.inspect_bag import main, summary
+    from suspension_tuning.tuning import physical_settings
+
+    contents = read_messages(OLD_RESULT)
+    old = decode(contents, contents.on('/optimisation/result')[-1])
+    assert not hasattr(old, 'best_iteration')  # the old layout: x is the last iterate
+    info = summary(OLD_RESULT)
+    records, optimum = info['iterations'], info['optimum']
+    assert optimum['source'] == 'history' and optimum['gtol'] == 1e-3
+    assert optimum['feasible'] and optimum['best_iteration'] == 29
+    assert optimum['x'] == records[29]['x'] and optimum['f'] == records[29]['f']
+    assert optimum['f'] == pytest.approx(0.11315855, abs=1e-8)  # inspect_bag's table
+    assert optimum['physical'] == physical_settings(records[29]['x'])
+    assert list(old.x) == records[30]['x']  # what the old result called the optimum
+    assert optimum['last_iterate']['iteration'] == 30
+    assert main([str(OLD_RESULT), '--plots', str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    assert 'best feasible design: iteration 29' in text
+    assert 'found in the recorded history with gtol = 0.001' in text
+    assert 'last iterate: iteration 30' in text
 
 
 def test_valve_switching_event_and_its_delay(bag):
@@ -292,3 +404,19 @@ def test_inspect_of_an_unreadable_file_says_why(tmp_path, capsys):
     garbage.write_bytes(b'this is not a bag')
     assert main([str(garbage)]) == 2
     assert 'not an MCAP file' in capsys.readouterr().err
+
+
+def test_a_resumed_run_prints_its_best_feasible_design_not_its_last_iterate():
+    from scipy.optimize import OptimizeResult
+
+    from suspension_tuning.inspect_bag import format_resumed
+
+    # last iterate x = (0.1, 0.9) infeasible; iteration 2 of the whole run is the best
+    result = OptimizeResult(
+        message='stopped: maximum number of iterations reached (final point infeasible)',
+        nit=5, n_full_runs=6, n_simplified_runs=40, x=[0.1, 0.9], f=1.0,
+        x_best=[0.25, 0.75], f_best=1.5, g_best=[-0.5], best_iteration=2,
+        best_feasible=True, max_violation_best=0.0)
+    line = format_resumed(result)
+    assert 'best feasible design: iteration 2: f = 1.5, x = [0.25, 0.75]' in line
+    assert 'iterations 5, full-model runs 6, simplified runs 40' in line
