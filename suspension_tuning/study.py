@@ -55,6 +55,7 @@ from scipy.optimize import minimize
 from suspension_tuning.optim.dynamic_q import load_options
 from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
 from suspension_tuning.paths import config_dir, dump_yaml
+from suspension_tuning.reported_design import ReportedDesign, reported_design, result_message
 from suspension_tuning.tuning import (
     FullEvaluation,
     RunCounter,
@@ -119,9 +120,13 @@ class StudyRun:
     calibration_samples : int
         Eq. 25 calibration samples (0 for methods without simplified models).
     x, f, g : list, float, list
-        Final design (normalised), objective and constraints (full model).
+        Reported design (normalised), objective and constraints (full model):
+        Dynamic-Q's best feasible iterate, or its least violating one when none was
+        feasible (``details['best_iteration']``, ``details['best_feasible']``; the last
+        iterate is ``details['x_last']``, ``f_last``, ``max_violation_last``); SLSQP's
+        final point; the reference's best feasible point.
     max_violation : float
-        max(0, max g) at the final design.
+        max(0, max g) at x.
     iterations : int
         Optimiser iterations.
     n_full_runs, n_simplified_runs, n_calibration_runs : int
@@ -130,7 +135,9 @@ class StudyRun:
         Wall time of the optimisation and of its calibration (shared by the runs that
         use the same calibration).
     success : bool
+        The method's own success; for Dynamic-Q also that x is feasible.
     message : str
+        The method's stop message.
     history : list of dict
         Per iteration: iteration, f, max_violation, n_full_runs, n_simplified_runs, x.
     distance_to_reference : float
@@ -378,34 +385,42 @@ def run_dynamic_q(
     )
     wall = time.perf_counter() - t0
     method = 'dq_simplified' if gradient_source == 'simplified' else 'dq_full'
+    design = reported_design(result)
+    if design is None:
+        raise ValueError(f'{scenario}, {n_vars} variables from {start}: Dynamic-Q evaluated '
+                         f'no design ({result.message})')
     run = StudyRun(
         scenario=scenario,
         n_vars=n_vars,
         start=start,
         method=method,
         calibration_samples=calibration_samples,
-        x=np.asarray(result.x, float).tolist(),
-        f=float(result.f),
-        g=np.asarray(result.g, float).tolist(),
-        max_violation=max_violation(result.g),
+        x=design.x,
+        f=design.f,
+        g=design.g,
+        max_violation=max_violation(design.g),
         iterations=int(result.nit),
         n_full_runs=counter.full_runs,
         n_simplified_runs=counter.simplified_runs,
         n_calibration_runs=counter.calibration_runs,
         wall_time_s=wall,
         calibration_wall_time_s=calibration_wall_time_s,
-        success=bool(result.success),
+        success=bool(result.success) and design.feasible,
         message=str(result.message),
         history=history,
         details={'optimiser_options': options, 'fd_step': FD_STEP,
-                 'integrator': integrator_name(integrator)},  # fmt: skip
+                 'integrator': integrator_name(integrator),
+                 'best_iteration': design.iteration, 'best_feasible': design.feasible,
+                 'x_last': np.asarray(result.x, float).tolist(), 'f_last': float(result.f),
+                 'max_violation_last': max_violation(result.g)},  # fmt: skip
     )
     if request.constraints:
         run.details.update(
             x0=request.start.tolist(),
             constraints=result.constraints,
             constraint_labels=[c.label for c in request.constraints],
-            constraint_values=result.constraint_values,
+            constraint_values=design.constraint_values,
+            constraint_values_last=result.constraint_values,
             constraint_gradient_sources=result.constraint_gradient_sources,
         )
     return run, recorder
@@ -692,12 +707,24 @@ def write_bag(path: Path, run: StudyRun, recorder: _Recorder) -> Path:
     latched = qos_profile_dict(durability='transient_local', depth=1)
     reliable = qos_profile_dict(depth=100)
     physical = physical_settings(run.x)
+    if 'best_iteration' in run.details:  # Dynamic-Q: its best iterate, and whether feasible
+        best_iteration, feasible = run.details['best_iteration'], run.details['best_feasible']
+        message = result_message(ReportedDesign(run.x, run.f, run.g, best_iteration, feasible,
+                                                run.max_violation), run.message)
+    else:  # SLSQP, the reference: the final point, as recorded
+        gtol = float(run.details.get('gtol', vehicle_options()['gtol']))
+        best_iteration = next((h['iteration'] for h in reversed(run.history)
+                               if h['x'] == run.x), max(len(run.history) - 1, 0))
+        feasible, message = run.max_violation <= gtol, run.message
     result = Optimise.Result(
         success=run.success,
-        message=run.message,
+        message=message,
         x=list(run.x),
         f=run.f,
         g=list(run.g),
+        feasible=bool(feasible),
+        best_iteration=int(best_iteration),
+        max_violation=float(run.max_violation),
         physical_names=list(physical),
         physical_values=list(physical.values()),
         iterations=run.iterations,

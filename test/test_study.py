@@ -135,11 +135,46 @@ def test_bags_reopen_and_report_the_same_optimum(case):
         info = summary(r.bag)
         opt = info['optimum']
         assert opt['f'] == r.f and opt['x'] == r.x
+        # the lane change lifts no tyre (g = -1): every reported design is feasible
+        assert opt['feasible'] and opt['source'] == 'result'
+        assert info['iterations'][opt['best_iteration']]['x'] == r.x
         assert opt['iterations'] == r.iterations
         assert info['evaluations']['n_full_runs'] == r.n_full_runs
         assert info['evaluations']['n_calibration_runs'] == r.n_calibration_runs
         assert info['run_config']['method'] == r.method
         assert [it['f'] for it in info['iterations']] == [h['f'] for h in r.history]
+
+
+def test_dynamic_q_runs_report_the_best_feasible_iterate_and_keep_the_last_in_details(
+        monkeypatch, tmp_path):
+    """One Dynamic-Q step (maxiter 1) from the centre crosses a constraint the gradient
+    misses: f = -(x1 + x2), g = x1 - 0.6, dg = 0 (a boundary the simplified model
+    places only roughly).  The run reports the feasible start, not the last iterate."""
+    from suspension_tuning import study
+    from suspension_tuning.tuning import FullEvaluation
+
+    def fake_model(scenario, n_vars, integrator=None):
+        def evaluate(points):
+            return FullEvaluation(-points[:, 0] - points[:, 1],
+                                  (points[:, 0] - 0.6)[:, None])
+        return evaluate
+
+    monkeypatch.setattr(study, 'full_model', fake_model)
+    run, recorder = study.run_dynamic_q(
+        'ride', 2, 'centre', 'simplified',
+        lambda x, inputs: (np.array([-1.0, -1.0]), np.zeros((1, 2))),
+        options={**study.vehicle_options(), 'maxiter': 1})
+    centre = 0.5005  # (0.001 + 1) / 2, eqs. 6 and 8
+    assert run.x == [centre, centre] and run.f == -2 * centre
+    assert run.max_violation == 0.0  # g = 0.5005 - 0.6 < 0
+    assert run.details['best_iteration'] == 0 and run.details['best_feasible']
+    # the step of rho0 = 0.3 (optimiser.yaml, vehicle) along (1, 1) / sqrt(2): x1 = 0.7126
+    assert run.details['x_last'][0] == pytest.approx(centre + 0.3 / np.sqrt(2))
+    assert run.details['max_violation_last'] == pytest.approx(centre + 0.3 / np.sqrt(2) - 0.6)
+    assert run.details['f_last'] < run.f and not run.success
+    opt = summary(study.write_bag(tmp_path / 'bag', run, recorder))['optimum']
+    assert (opt['x'], opt['best_iteration'], opt['feasible']) == (run.x, 0, True)
+    assert opt['message'].startswith('best feasible design: iteration 0; Dynamic-Q stopped')
 
 
 def test_grid_spans_the_bounds():
