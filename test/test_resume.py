@@ -34,6 +34,9 @@ def test_recorded_run_resumes_to_the_uninterrupted_iterates(start_tuning_graph):
     np.testing.assert_array_equal(resumed.x, straight.x)
     assert resumed.f == straight.f
     assert resumed.nit == straight.nit
+    # The design to report is the best over the whole run, the bag's iterations included.
+    np.testing.assert_array_equal(resumed.x_best, straight.x_best)
+    assert resumed.best_iteration == straight.best_iteration
     # The resumed run counts the recorded runs plus its own.  A record is published
     # after its evaluation and before the gradient at that point, so the resumed run's
     # first gradient (2n = 4 runs) is the one the interrupted run never took: the totals
