@@ -25,6 +25,7 @@ otherwise (named metrics, the 'mixed' scenario); the result says which per const
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -33,6 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import OptimizeResult
 
+from suspension_tuning.optim.correction import CorrectionOptions, SecantCorrection
 from suspension_tuning.optim.dynamic_q import DynamicQ, DynamicQOptions
 from suspension_tuning.optim.finite_diff import central_difference
 from suspension_tuning.vehicle.design import (
@@ -91,8 +93,11 @@ class FullEvaluation:
 
 #: Full model on a batch: designs (m, n) -> FullEvaluation.
 FullModel = Callable[[Array], FullEvaluation]
-#: Scaled simplified-model gradient at x with the full model's inputs -> (df, dg).
-SimplifiedGradient = Callable[[Array, Any], tuple[Array, Array]]
+#: Scaled simplified-model gradient at x with the full model's inputs -> (df, dg,
+#: values): the gradient of f, the Jacobian of g and the scaled simplified values
+#: (f, g) at x itself, which the first-order correction needs.  A source that returns
+#: only (df, dg) runs without the correction.
+SimplifiedGradient = Callable[[Array, Any], tuple[Array, ...]]
 
 
 @dataclass
@@ -259,6 +264,10 @@ class TuningRequest:
     integrator : str
         Full-model integrator: 'fixed_step', 'variable_step' or '' (the simulation's
         default, config/vehicle.yaml).
+    correction : mapping, optional
+        Options of the first-order correction of simplified gradients
+        (:class:`~suspension_tuning.optim.correction.CorrectionOptions`; default:
+        the secant correction).
     """
 
     scenario: str
@@ -269,6 +278,7 @@ class TuningRequest:
     fd_step: float = 0.025
     constraints: Sequence[Any] = ()
     integrator: str = ''
+    correction: Mapping[str, Any] | None = None
     start: Array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -289,6 +299,8 @@ class TuningRequest:
         x0 = centre(self.n_vars) if self.x0 is None or len(self.x0) == 0 else self.x0
         object.__setattr__(self, 'start', validate_design(x0, self.n_vars)[0])
         DynamicQOptions.from_mapping(self.options)
+        object.__setattr__(self, 'correction',
+                           CorrectionOptions.from_mapping(self.correction).as_dict())
         object.__setattr__(self, 'constraints', constraint_specs(self.constraints))
 
     @property
@@ -387,10 +399,18 @@ def optimise(request: TuningRequest, full_model: FullModel,
     lower, upper = np.full(n, X_LOWER), np.full(n, X_UPPER)
     opt = DynamicQ(request.start, lower, upper, request.options, history=history,
                    gradient_source=request.gradient_source)
+    correction_options = CorrectionOptions.from_mapping(request.correction)
+    correct = request.gradient_source == 'simplified' and correction_options.method != 'none'
+    correction: SecantCorrection | None = None
+    # Full-model values at every evaluated design (the history's too, when resumed):
+    # the correction compares them with the simplified values at the same design.
+    evaluated = {np.asarray(r['x'], float).tobytes(): np.r_[float(r['f']), np.asarray(
+        r['g'], float)] for r in (history or ())}
     while (ask := opt.ask()) is not None:
         kind, x = ask
         if kind == 'evaluate':
             f, g = terms.evaluate(x)
+            evaluated[x.tobytes()] = np.r_[f, g]
             record = opt.tell((f, g, None))
         elif request.gradient_source == 'full':
             def values(points: Array) -> Array:
@@ -399,7 +419,14 @@ def optimise(request: TuningRequest, full_model: FullModel,
             jac = central_difference(values, x, request.fd_step, lower, upper)
             record = opt.tell((jac[0], jac[1:], None), source='full')
         else:
-            df, dg = terms.simplified_gradient(x, lower, upper)
+            df, dg, values = terms.simplified_gradient(x, lower, upper)
+            full = evaluated.get(x.tobytes())
+            if correct and values is not None and full is not None:
+                if correction is None:
+                    correction = SecantCorrection(full.size, n, correction_options.min_step)
+                correction.observe(x, full, values)
+                jac = correction.correct(np.vstack([df, dg]))
+                df, dg = jac[0], jac[1:]
             record = opt.tell((df, dg, None), source='simplified')
         if record is not None and callback is not None and callback(record, counter):
             opt.stop('cancelled')
@@ -417,6 +444,8 @@ def optimise(request: TuningRequest, full_model: FullModel,
                   constraint_gradient_sources=request.constraint_gradient_sources())
     if 'g_best' in result:
         result.update(constraint_values_best=constraint_values(result.g_best))
+    result.update(correction=correction.summary() if correction is not None
+                  else {'method': 'none'})
     return result
 
 
@@ -490,27 +519,39 @@ class _ConstraintTerms:
             self.inputs[scenario] = self._run(scenario, x[None, :]).inputs
         return self.inputs.get(scenario)
 
-    def _simplified(self, scenario: str, x: Array) -> tuple[Array, Array]:
+    def _simplified(self, scenario: str, x: Array) -> tuple[Array, Array, Array | None]:
         gradient = self.gradients[scenario]
         assert gradient is not None
-        df, dg = gradient(x, self._inputs(scenario, x))
-        self.counter.simplified_runs += 2 * self.request.n_vars
-        return np.asarray(df, float), np.asarray(dg, float)
+        df, dg, *rest = gradient(x, self._inputs(scenario, x))
+        values = np.asarray(rest[0], float) if rest and rest[0] is not None else None
+        self.counter.simplified_runs += 2 * self.request.n_vars + (values is not None)
+        return np.asarray(df, float), np.asarray(dg, float), values
 
     def simplified_gradient(self, x: Array, lower: Array, upper: Array
-                            ) -> tuple[Array, Array]:
-        """Gradient of f and Jacobian of g: simplified rows where possible, else full."""
+                            ) -> tuple[Array, Array, Array | None]:
+        """Gradient of f and Jacobian of g: simplified rows where possible, else full.
+
+        Also the scaled simplified values at x in the same rows (f, then g), NaN in the
+        rows from full-model central differences; None when a simplified source gave
+        no values.
+        """
         request = self.request
         simplified = {request.scenario: self._simplified(request.scenario, x)}
-        df, dg = simplified[request.scenario]
+        df, dg, primary_values = simplified[request.scenario]
         rows: list[Array | None] = []
+        row_values: list[float] = []
         for spec, source in zip(request.constraints, self.sources):
             if source == 'simplified':
                 if spec.scenario not in simplified:
                     simplified[spec.scenario] = self._simplified(spec.scenario, x)
-                rows.append(spec.derivative(*simplified[spec.scenario]))
+                sdf, sdg, svalues = simplified[spec.scenario]
+                rows.append(spec.derivative(sdf, sdg))
+                row_values.append(math.nan if svalues is None else
+                                  float(spec.derivative(svalues[:1], svalues[1:, None])[0])
+                                  - spec.upper_bound)
             else:
                 rows.append(None)
+                row_values.append(math.nan)
         full_terms = [i for i, row in enumerate(rows) if row is None]
         by_scenario: dict[str, list[int]] = {}
         for i in full_terms:
@@ -527,4 +568,7 @@ class _ConstraintTerms:
             for i, row in zip(indices, jac):
                 rows[i] = row
         extra = np.array(rows, dtype=float).reshape(len(rows), request.n_vars)
-        return df, np.vstack([np.asarray(dg, float).reshape(-1, request.n_vars), extra])
+        values = None
+        if all(v[2] is not None for v in simplified.values()):
+            values = np.r_[primary_values, row_values]
+        return df, np.vstack([np.asarray(dg, float).reshape(-1, request.n_vars), extra]), values

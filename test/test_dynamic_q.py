@@ -392,3 +392,60 @@ def test_vehicle_options_on_noisy_quadratic_with_large_step_differences(x0):
     assert np.max(np.abs(result.x - [0.3, 0.7])) <= 3e-3
     assert result.nit <= options.maxiter
     assert result.ngev_by_source == {'simplified': result.ngev}
+
+
+def _drive(options, gradient, source, x0=(0.9, 0.9)):
+    """Run the driver on min |x - (0.3, 0.7)|^2 s.t. x1 + x2 <= 0.8 with a given gradient."""
+    target = np.array([0.3, 0.7])
+    driver = DynamicQ(np.array(x0), [0.0, 0.0], [1.0, 1.0], options)
+    while (request := driver.ask()) is not None:
+        kind, x = request
+        if kind == 'evaluate':
+            driver.tell((np.sum((x - target) ** 2), [x.sum() - 0.8], None))
+        else:
+            driver.tell(gradient(x, target), source=source)
+    return driver.result()
+
+
+def _slightly_wrong_gradient(x, target):
+    # the constraint's slope 10 % too flat, as a simplified model's would be
+    return 2.0 * (x - target), np.array([[0.9, 0.9]]), None
+
+
+@pytest.mark.parametrize('source, zero', [('simplified', True), ('full', False)])
+def test_surrogate_constraint_curvature_is_zero_only_for_simplified_gradients(source, zero):
+    result = _drive({'surrogate_constraint_curvature': 'zero', 'maxiter': 8},
+                    _slightly_wrong_gradient, source)
+    b = [r['curvature']['b'][0] for r in result.history[2:]]  # from the 2nd iteration on
+    assert all(v == 0.0 for v in b) == zero
+    # objective curvature: interpolated as always (exact quadratic: a = 2, hand)
+    a = [r['curvature']['a'] for r in result.history[2:]]
+    np.testing.assert_allclose(a, 2.0, rtol=1e-9)
+
+
+def test_surrogate_objective_curvature_nonnegative_clips_only_negative_values():
+    def wrong_f_slope(x, target):  # a gradient of f 30 % too steep makes a < 0 possible
+        return 1.3 * 2.0 * (x - target), np.array([[1.0, 1.0]]), None
+
+    result = _drive({'surrogate_objective_curvature': 'nonnegative', 'maxiter': 10},
+                    wrong_f_slope, 'simplified')
+    a = [r['curvature']['a'] for r in result.history[2:]]
+    assert min(a) >= 0.0
+    with pytest.raises(ValueError, match='surrogate_objective_curvature'):
+        DynamicQOptions(surrogate_objective_curvature='negative')
+
+
+def test_a_single_short_step_does_not_stop_a_run_that_needs_two():
+    # From a feasible start on the constraint, the first step is short (x0 is 1e-7 from
+    # the optimum (0.2, 0.6), below xtol 1e-5): with converge_iterations 1 that step
+    # ends the run; with 2 the run needs a second converged iteration.
+    x0 = (0.2 + 1e-7, 0.6 - 1e-7)
+    one = _drive({'converge_iterations': 1}, lambda x, t: (2.0 * (x - t), [[1.0, 1.0]], None),
+                 'analytic', x0)
+    two = _drive({'converge_iterations': 2}, lambda x, t: (2.0 * (x - t), [[1.0, 1.0]], None),
+                 'analytic', x0)
+    assert one.nit == 1 and one.status == 0
+    assert two.nit == 2 and two.status == 0
+    assert [r['converge_count'] for r in two.history] == [0, 1, 2]
+    with pytest.raises(ValueError, match='converge_iterations'):
+        DynamicQOptions(converge_iterations=0)

@@ -52,10 +52,11 @@ def test_ride_optimisation_with_simplified_gradients_converges_through_the_graph
     assert result.n_calibration_runs == SAMPLES
     n = 2
     # Paper section 2: one full run per iteration (per evaluation) and 2n simplified
-    # runs per gradient; no full-model gradient runs.
+    # runs per gradient, plus one at the iterate for the correction's values; no
+    # full-model gradient runs.
     iterations_evaluated = len(result.history)
     assert result.n_full_runs == iterations_evaluated
-    assert result.n_simplified_runs % (2 * n) == 0 and result.n_simplified_runs > 0
+    assert result.n_simplified_runs % (2 * n + 1) == 0 and result.n_simplified_runs > 0
     phases = [message.feedback.phase for message in feedback]
     assert phases.count('iteration') == len(result.history)
     # The calibration's progress comes first, a step per calibration_chunk (6 designs,
@@ -109,4 +110,6 @@ def test_gradient_service_errors_and_calibration_cache(graph, monkeypatch):
         assert re.search(message, answer.error), answer.error
     good = wait(gradient.call_async(EvaluateGradient.Request(scenario='ride', n_vars=2,
                                                              x=[0.5, 0.5])))
-    assert good.success and len(good.df) == 2 and good.n_model_runs == 4  # 2n runs
+    # 2n stencil runs and x itself; the values at x are eq. 25 of the model's values
+    assert good.success and len(good.df) == 2 and good.n_model_runs == 5
+    assert len(good.values) == 1 + good.n_constraints

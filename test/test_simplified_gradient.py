@@ -26,19 +26,23 @@ def _toy_scaling(factor_f=2.0):
 def test_gradient_is_scaled_central_difference_of_one_batch():
     grad = SimplifiedGradient('ride', 2, _toy_scaling(2.0), step=0.025)
     x = np.array([0.4, 0.6])
-    df, dg = grad(x)
-    assert df.shape == (2,) and dg.shape == (4, 2)
-    assert grad.n_runs == 4  # 2n simplified runs, one batch
+    df, dg, values = grad(x)
+    assert df.shape == (2,) and dg.shape == (4, 2) and values.shape == (5,)
+    assert grad.n_runs == 5  # 2n stencil runs and x itself, one batch
     # hand: eq. 25 factor 2 times (f(x + h e_i) - f(x - h e_i)) / 2h
-    pts = np.array([[0.425, 0.6], [0.4, 0.625], [0.375, 0.6], [0.4, 0.575]])
+    pts = np.array([[0.425, 0.6], [0.4, 0.625], [0.375, 0.6], [0.4, 0.575], [0.4, 0.6]])
     out = run_simplified('ride', pts, 2)
-    f, g = out['f'], out['g']
-    np.testing.assert_allclose(df, 2.0 * (f[:2] - f[2:]) / 0.05, rtol=1e-9)
+    f, g = out['f'], out['g_soft']
+    np.testing.assert_allclose(df, 2.0 * (f[:2] - f[2:4]) / 0.05, rtol=1e-9)
     # the toy constraints are constant in the samples ('simplified_constant' rule): unit
     # factor, so the constraint Jacobian is the plain central difference of the pitch-
-    # plane eq. 11 values (the Belgian paving makes its tyres hop here)
-    np.testing.assert_allclose(dg, ((g[:2] - g[2:]) / 0.05).T, rtol=1e-9, atol=1e-12)
+    # plane model's smooth tyre-hop measure (config tyre_hop_gradient: soft; the Belgian
+    # paving unloads its tyres here)
+    np.testing.assert_allclose(dg, ((g[:2] - g[2:4]) / 0.05).T, rtol=1e-9, atol=1e-12)
     assert np.any(dg != 0.0)
+    # the values at x: eq. 25 of the model's own values there (f: factor 2, offset 0;
+    # constraints: unit factor, offset F_Amin - F_Mmin = 0)
+    np.testing.assert_allclose(values, np.r_[2.0 * f[4], g[4]], rtol=1e-12)
 
 
 def test_stencil_never_leaves_the_bounds():
@@ -50,11 +54,12 @@ def test_stencil_never_leaves_the_bounds():
             return super().values(x, inputs)
 
     grad = Recording('ride', 2, None, step=0.05)
-    df, _ = grad(np.array([0.001, 1.0]))
+    df, _, _ = grad(np.array([0.001, 1.0]))
     pts = np.vstack(seen)
     assert np.all(pts >= 0.001) and np.all(pts <= 1.0)
-    # at the bounds the pair is shifted inside with width 2h = 0.1 (finite_diff.py)
-    np.testing.assert_allclose(sorted(pts[:, 0]), [0.001, 0.001, 0.001, 0.101])
+    # at the bounds the pair is shifted inside with width 2h = 0.1 (finite_diff.py); the
+    # fifth point is x itself
+    np.testing.assert_allclose(sorted(pts[:, 0]), [0.001, 0.001, 0.001, 0.001, 0.101])
     assert np.all(np.isfinite(df))
 
 
@@ -75,8 +80,8 @@ def test_handling_gradient_uses_full_run_inputs():
     full = run_scenario('handling', np.array([[0.5, 0.5]]))
     inputs = SimplifiedInputs.from_scenario_result(full)
     grad = SimplifiedGradient('handling', 2, None, step=0.025)
-    df, dg = grad(np.array([0.5, 0.5]), full)  # a ScenarioResult is accepted as inputs
-    df2, _ = grad(np.array([0.5, 0.5]), inputs)
+    df, dg, _ = grad(np.array([0.5, 0.5]), full)  # a ScenarioResult is accepted as inputs
+    df2, _, _ = grad(np.array([0.5, 0.5]), inputs)
     np.testing.assert_array_equal(df, df2)
     # hand check of one component from the model's values
     v = simplified_values('handling', np.array([[0.525, 0.5], [0.475, 0.5]]), 2, inputs)

@@ -63,9 +63,10 @@ def test_every_method_runs_from_both_start_points(case):
 def test_simplified_gradient_runs_cost_one_full_run_per_iteration(case):
     for r in runs_of(case, 'dq_simplified'):
         # Section 2: one full run per iterate (the start plus one per iteration) and 2n
-        # simplified runs per gradient (one gradient per iteration).
+        # simplified runs per gradient (one gradient per iteration), plus one at the
+        # iterate itself for the first-order correction's values.
         assert r.n_full_runs == r.iterations + 1
-        assert r.n_simplified_runs == 2 * N * r.iterations
+        assert r.n_simplified_runs == (2 * N + 1) * r.iterations
         assert r.n_calibration_runs == SAMPLES
         assert r.full_runs_with_calibration == r.n_full_runs + SAMPLES
         assert r.history[-1]['n_full_runs'] == r.n_full_runs

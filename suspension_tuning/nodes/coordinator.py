@@ -41,6 +41,7 @@ from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning.nodes._services import ServiceCallError, SimulationPool, call
 from suspension_tuning.nodes._spin import run_node
+from suspension_tuning.optim.correction import load_correction_options
 from suspension_tuning.optim.dynamic_q import load_options
 from suspension_tuning.paths import config_dir, dump_yaml, read_yaml
 from suspension_tuning.reported_design import reported_design, result_message
@@ -144,7 +145,7 @@ class CoordinatorNode(Node):
         self.declare_parameter('sim_workers', ['/full_vehicle_sim'])
         self.declare_parameter('gradient_node', '/gradient_evaluator')
         self.declare_parameter('call_timeout_s', 600.0)
-        self.declare_parameter('calibration_samples', 30)
+        self.declare_parameter('calibration_samples', 16)
         self.declare_parameter('fd_step', 0.025)
         self.declare_parameter('optimiser_config', '')
         self.declare_parameter('optimiser_section', 'vehicle')
@@ -182,6 +183,7 @@ class CoordinatorNode(Node):
         config = str(self.get_parameter('optimiser_config').value) or str(
             CONFIG_DIR / 'optimiser.yaml')
         self.options = load_options(config, str(self.get_parameter('optimiser_section').value))
+        self.correction = load_correction_options(config)
         self.progress_pub = self.create_publisher(IterationRecord, '/optimisation/progress',
                                                   RELIABLE)
         self.config_pub = self.create_publisher(String, '/optimisation/run_config', LATCHED)
@@ -228,7 +230,7 @@ class CoordinatorNode(Node):
         return TuningRequest(goal.scenario, int(goal.n_vars), list(goal.x0) or None,
                              goal.gradient_source or 'simplified', options,
                              float(self.get_parameter('fd_step').value), constraints,
-                             integrator=goal.integrator)
+                             integrator=goal.integrator, correction=self.correction)
 
     def _publish_run_config(self, request: TuningRequest) -> None:
         config = {
@@ -280,7 +282,8 @@ class CoordinatorNode(Node):
         """The scaled simplified gradient of ``scenario`` from the gradient evaluator."""
         scenario = scenario or request.scenario
 
-        def gradient(x: np.ndarray, inputs: Any) -> tuple[np.ndarray, np.ndarray]:
+        def gradient(x: np.ndarray, inputs: Any
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
             response = call(self, self.gradient_client, EvaluateGradient.Request(
                 scenario=scenario, n_vars=request.n_vars, x=x.tolist(),
                 step=request.fd_step,
@@ -289,7 +292,8 @@ class CoordinatorNode(Node):
             if not response.success:
                 raise ValueError(f'gradient evaluator: {response.error}')
             dg = np.asarray(response.dg, float).reshape(response.n_constraints, request.n_vars)
-            return np.asarray(response.df, float), dg
+            values = np.asarray(response.values, float) if len(response.values) else None
+            return np.asarray(response.df, float), dg, values
         return gradient
 
     @staticmethod

@@ -58,7 +58,7 @@ class GradientEvaluatorNode(Node):
         super().__init__('gradient_evaluator', **kwargs)
         self.declare_parameter('sim_workers', ['/full_vehicle_sim'])
         self.declare_parameter('calibration_dir', '')
-        self.declare_parameter('default_samples', 30)
+        self.declare_parameter('default_samples', 16)
         self.declare_parameter('default_step', 0.025)
         self.declare_parameter('call_timeout_s', 600.0)
         # Designs per progress step of a calibration (each step one batch to the workers).
@@ -82,7 +82,8 @@ class GradientEvaluatorNode(Node):
     # ---------------------------------------------------------------- calibrate
     def _cache_path(self, key: dict) -> Path:
         tail = f"_{key['integrator']}" if 'integrator' in key else ''
-        return self.calibration_dir / (f"{key['scenario']}_{key['n_vars']}var_"
+        return self.calibration_dir / (f"v{key['calibration_version']}_"
+                                       f"{key['scenario']}_{key['n_vars']}var_"
                                        f"{key['n_samples']}s_{key['seed']}_"
                                        f"{key['config_hash']}{tail}.json")
 
@@ -172,7 +173,7 @@ class GradientEvaluatorNode(Node):
             step = float(request.step or self.get_parameter('default_step').value)
             source = SimplifiedGradient(scenario, n_vars, scaling, step)
             inputs = simplified_inputs.unpack(scenario, request.inputs, x)
-            df, dg = source(x, inputs)
+            df, dg, values = source(x, inputs)
         except ValueError as error:
             response.success, response.error = False, str(error)
             self.get_logger().warning(f'bad gradient request: {error}')
@@ -182,6 +183,7 @@ class GradientEvaluatorNode(Node):
         response.df = np.asarray(df, dtype=float).tolist()
         response.n_constraints = int(dg.shape[0])
         response.dg = np.asarray(dg, dtype=float).ravel().tolist()
+        response.values = np.asarray(values, dtype=float).tolist()
         response.n_model_runs = int(source.n_runs)
         response.wall_time_s = time.monotonic() - start
         return response

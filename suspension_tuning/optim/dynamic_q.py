@@ -120,6 +120,8 @@ STATUS_MESSAGES = {
 
 #: Values of ``DynamicQOptions.surrogate_constraint_curvature``.
 SURROGATE_CURVATURES = ('interpolate', 'zero')
+#: Values of ``DynamicQOptions.surrogate_objective_curvature``.
+SURROGATE_OBJECTIVE_CURVATURES = ('interpolate', 'nonnegative', 'zero')
 #: Gradient sources that come from another model than the values (a surrogate).
 SURROGATE_SOURCES = ('simplified',)
 
@@ -190,6 +192,7 @@ class DynamicQOptions:
     maxiter: int = 100
     curvature_cap: float = math.inf
     surrogate_constraint_curvature: str = 'interpolate'
+    surrogate_objective_curvature: str = 'interpolate'
     converge_iterations: int = 1
     lfopc: Mapping[str, Any] | None = None
 
@@ -216,6 +219,10 @@ class DynamicQOptions:
             raise ValueError(
                 f'curvature_cap must be > 0 (inf allowed), got {self.curvature_cap!r}'
             )
+        if self.surrogate_objective_curvature not in SURROGATE_OBJECTIVE_CURVATURES:
+            raise ValueError(f'surrogate_objective_curvature must be one of '
+                             f'{", ".join(SURROGATE_OBJECTIVE_CURVATURES)}, got '
+                             f'{self.surrogate_objective_curvature!r}')
         if self.surrogate_constraint_curvature not in SURROGATE_CURVATURES:
             raise ValueError(f'surrogate_constraint_curvature must be one of '
                              f'{", ".join(SURROGATE_CURVATURES)}, got '
@@ -833,9 +840,13 @@ class DynamicQ:
                     )
                     b = _curvature(ref.g, cur.g, cur.dg, dx, dx2, cap)
                     c = _curvature(ref.h, cur.h, cur.dh, dx, dx2, cap)
-                    if (opt.surrogate_constraint_curvature == 'zero'
-                            and cur.source in SURROGATE_SOURCES):
-                        b, c = np.zeros(cur.g.size), np.zeros(cur.h.size)
+                    if cur.source in SURROGATE_SOURCES:
+                        if opt.surrogate_constraint_curvature == 'zero':
+                            b, c = np.zeros(cur.g.size), np.zeros(cur.h.size)
+                        if opt.surrogate_objective_curvature == 'zero':
+                            a = 0.0
+                        elif opt.surrogate_objective_curvature == 'nonnegative':
+                            a = max(a, 0.0)
                 else:
                     a, b, c = 0.0, np.zeros(cur.g.size), np.zeros(cur.h.size)
             rho = self._rho

@@ -359,9 +359,17 @@ def fit_scaling(
     return Scaling(funcs, dict(key or {}), x, a, m)
 
 
+#: Version of what a calibration holds; raised whenever the simplified values it maps
+#: change meaning, so that a cached calibration made before is never reused.
+#: 2: the constraints' simplified values are the measure of
+#: config/simplified_models.yaml ``tyre_hop_gradient`` (the smooth tyre-hop measure).
+CALIBRATION_VERSION = 2
+
+
 def scaling_key(scenario: str, n_vars: int, n_samples: int, seed: int) -> dict[str, Any]:
-    """Cache key of a calibration: scenario, n_vars, n_samples, seed and config hash."""
+    """Cache key of a calibration: version, scenario, n_vars, n_samples, seed, config hash."""
     return {
+        'calibration_version': CALIBRATION_VERSION,
         'scenario': scenario,
         'n_vars': int(n_vars),
         'n_samples': int(n_samples),

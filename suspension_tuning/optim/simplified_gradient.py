@@ -65,12 +65,25 @@ def simplified_values(
 ) -> Array:
     """Simplified-model values (batch, 1 + 4): objective then constraints FL..RR.
 
-    Scaled by eq. 25 when ``scaling`` is given.
+    The constraints are the tyre-hop measure that config/simplified_models.yaml
+    ``tyre_hop_gradient.measure`` names: 'soft' (the default,
+    :func:`~suspension_tuning.vehicle.metrics.soft_tyre_hop_constraints`, smooth in the
+    design) or 'count' (eq. 11 as the full model counts it).  Scaled by eq. 25 when
+    ``scaling`` is given.
     """
     inp = as_simplified_inputs(scenario, inputs)
     out = run_simplified(scenario, x, n_vars, inp)
-    vals = np.column_stack([out['f'], out['g']])
+    vals = np.column_stack([out['f'], out[constraint_measure_key()]])
     return scaling.apply(vals) if scaling is not None else vals
+
+
+def constraint_measure_key() -> str:
+    """Key of the simplified models' output that gives the constraints: 'g' or 'g_soft'."""
+    measure = load_simplified_config()['tyre_hop_gradient']['measure']
+    if measure not in ('soft', 'count'):
+        raise ValueError(f"config/simplified_models.yaml tyre_hop_gradient.measure must be "
+                         f"'soft' or 'count', got {measure!r}")
+    return 'g_soft' if measure == 'soft' else 'g'
 
 
 def calibration_settings(n_samples: int | None = None, seed: int | None = None
@@ -216,7 +229,9 @@ class SimplifiedGradient:
     Notes
     -----
     ``__call__(x, inputs)`` matches ``tuning.SimplifiedGradient``: it returns
-    ``(df (n,), dg (4, n))`` and counts 2n simplified runs in ``n_runs``.
+    ``(df (n,), dg (4, n), values (5,))``, the gradients and the scaled values at x
+    itself (what the first-order correction of ``optim.correction`` compares with the
+    full model), from one batch of 2n + 1 simplified runs, counted in ``n_runs``.
     """
 
     def __init__(
@@ -251,14 +266,23 @@ class SimplifiedGradient:
         self.n_runs += xb.shape[0]
         return simplified_values(self.scenario, xb, self.n_vars, inputs, self.scaling)
 
-    def __call__(self, x: ArrayLike, inputs: Any = None) -> tuple[Array, Array]:
-        """Gradient of f (n,) and Jacobian of g (4, n) at x (one batch of 2n runs)."""
+    def __call__(self, x: ArrayLike, inputs: Any = None) -> tuple[Array, Array, Array]:
+        """Gradient of f (n,), Jacobian of g (4, n) and the values (5,) at x.
+
+        One batch of 2n + 1 runs: the central-difference stencil and x itself.
+        """
         x1 = validate_design(x, self.n_vars)
         if x1.shape[0] != 1:
             raise ValueError(f'gradient needs one design, got {x1.shape[0]}')
         inp = as_simplified_inputs(self.scenario, inputs)
-        jac = central_difference(
-            lambda pts: self.values(pts, inp), x1[0], self.step, self.lower, self.upper
-        )
+        centre: list[Array] = []
+
+        def stencil_and_centre(points: Array) -> Array:
+            values = self.values(np.vstack([points, x1]), inp)
+            centre.append(values[-1])
+            return values[:-1]
+
+        jac = central_difference(stencil_and_centre, x1[0], self.step, self.lower,
+                                 self.upper)
         self.n_calls += 1
-        return jac[0], jac[1:]
+        return jac[0], jac[1:], centre[0]

@@ -38,7 +38,13 @@ import numpy as np
 from . import _simplified_kernel as SK  # noqa: N812
 from . import strut as strut_mod
 from .design import AxleSettings, to_physical, validate_design
-from .metrics import FZ_CONTACT_THRESHOLD_N, f_hand, first_peak, roll_rate_rms
+from .metrics import (
+    FZ_CONTACT_THRESHOLD_N,
+    f_hand,
+    first_peak,
+    roll_rate_rms,
+    soft_tyre_hop_constraints,
+)
 from .params import VehicleParams, load_vehicle_params
 from .pitch_plane import axle_strut_states, load_simplified_config, strut_block
 from .tyre import pacejka89_lateral
@@ -148,6 +154,8 @@ class HandlingModel:
                 f'roll_moment_arm must be one of {ROLL_ARMS}, got {opt["roll_moment_arm"]!r}'
             )
         self.options = opt
+        self.soft_load_fraction = float(
+            load_simplified_config()['tyre_hop_gradient']['load_fraction'])
         p = self.params
         self.roll_arm_m = p.cg_height_m
         if opt['roll_moment_arm'] == 'roll_axis':
@@ -245,7 +253,10 @@ class HandlingModel:
         """
         xb = validate_design(x, n_vars)
         rec = self.simulate(to_physical(xb), inputs)
-        return handling_metrics(rec, inputs)
+        p = self.params
+        static = np.array([p.static_tyre_load_front_n, p.static_tyre_load_front_n,
+                           p.static_tyre_load_rear_n, p.static_tyre_load_rear_n])
+        return handling_metrics(rec, inputs, static, self.soft_load_fraction)
 
 
 def _half_steps(a: np.ndarray) -> np.ndarray:
@@ -257,8 +268,15 @@ def _half_steps(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(out)
 
 
-def handling_metrics(rec: HandlingRecord, inputs: HandlingInputs) -> dict[str, np.ndarray]:
-    """Eq. 10 and eq. 11 of a handling record, with the full model's metric windows."""
+def handling_metrics(rec: HandlingRecord, inputs: HandlingInputs,
+                     static_load_n: np.ndarray | None = None,
+                     load_fraction: float | None = None) -> dict[str, np.ndarray]:
+    """Eq. 10 and eq. 11 of a handling record, with the full model's metric windows.
+
+    With the static wheel loads (FL, FR, RL, RR, N) and a load fraction, also 'g_soft':
+    :func:`~suspension_tuning.vehicle.metrics.soft_tyre_hop_constraints` over the
+    manoeuvre, the tyre-hop measure for gradients.
+    """
     t = rec.t_s
     roll_deg = np.degrees(rec.roll_rad)
     rate_deg = np.degrees(rec.roll_rate_radps)
@@ -269,12 +287,16 @@ def handling_metrics(rec: HandlingRecord, inputs: HandlingInputs) -> dict[str, n
         raise ValueError('manoeuvre window contains no samples')
     lift = rec.tyre_fz_n[..., in_man] <= FZ_CONTACT_THRESHOLD_N
     g = 10.0 * (lift.mean(axis=-1) - 0.1)
-    return {
+    out = {
         'f': np.atleast_1d(f_hand(rate_rms, peak)),
         'g': g,
         'roll_first_peak_deg': np.atleast_1d(peak),
         'roll_rate_rms_deg_s': np.atleast_1d(rate_rms),
     }
+    if static_load_n is not None and load_fraction is not None:
+        out['g_soft'] = soft_tyre_hop_constraints(rec.tyre_fz_n[..., in_man], static_load_n,
+                                                  load_fraction)
+    return out
 
 
 def derivative_numpy(

@@ -47,7 +47,7 @@ from . import strut as strut_mod
 from .comfort import weighted_rms
 from .design import AxleSettings, to_physical, validate_design
 from .full_model import RoadInput
-from .metrics import f_ride, tyre_hop_constraints
+from .metrics import f_ride, soft_tyre_hop_constraints, tyre_hop_constraints
 from .params import CONFIG_DIR, VehicleParams, load_scenarios_config, load_vehicle_params
 from .road import RoadProfile, RoadSpec, synthesise_tracks
 from .scenarios import ride_road_spec
@@ -227,7 +227,9 @@ class PitchPlaneModel:
     ) -> None:
         self.params = params if params is not None else load_vehicle_params()
         self.setup = setup if setup is not None else RideSetup.from_scenario_config(self.params)
-        cfg = load_simplified_config()['pitch_plane']
+        config = load_simplified_config()
+        cfg = config['pitch_plane']
+        self.soft_load_fraction = float(config['tyre_hop_gradient']['load_fraction'])
         self.dt_s = float(dt_s if dt_s is not None else cfg['time_step_s'])
         if not np.isfinite(self.dt_s) or self.dt_s <= 0:
             raise ValueError(f'dt_s must be positive, got {self.dt_s}')
@@ -326,23 +328,37 @@ class PitchPlaneModel:
         """
         xb = validate_design(x, n_vars)
         rec = self.simulate(to_physical(xb))
-        return ride_metrics(rec, self.setup.settle_s)
+        static = np.array([self.params.static_tyre_load_front_n,
+                           self.params.static_tyre_load_rear_n])
+        return ride_metrics(rec, self.setup.settle_s, static, self.soft_load_fraction)
 
 
-def ride_metrics(rec: PitchPlaneRecord, settle_s: float) -> dict[str, np.ndarray]:
-    """Eq. 9 objective and eq. 11 constraints of a pitch-plane record (full-model rules)."""
+def ride_metrics(rec: PitchPlaneRecord, settle_s: float,
+                 static_load_n: np.ndarray | None = None,
+                 load_fraction: float | None = None) -> dict[str, np.ndarray]:
+    """Eq. 9 objective and eq. 11 constraints of a pitch-plane record (full-model rules).
+
+    With the static wheel loads (front, rear, N) and a load fraction, also 'g_soft':
+    :func:`~suspension_tuning.vehicle.metrics.soft_tyre_hop_constraints` per corner,
+    the tyre-hop measure for gradients.
+    """
     fs = 1.0 / rec.dt_s
     # one call for both seats: comfort.wb_sos designs the filter per call (~3 ms)
     acc = np.stack([rec.acc_driver_mps2, rec.acc_passenger_mps2])
     a_d, a_p = np.atleast_2d(weighted_rms(acc, fs, settle_s))
     keep = rec.t_s >= settle_s  # the full model counts lift-off after settling too
     g2 = tyre_hop_constraints(rec.tyre_fz_n[..., keep], rec.dt_s)
-    return {
+    out = {
         'f': f_ride(a_d, a_p),
         'g': g2[:, [0, 0, 1, 1]],
         'a_rms_driver_mps2': a_d,
         'a_rms_passenger_mps2': a_p,
     }
+    if static_load_n is not None and load_fraction is not None:
+        soft = soft_tyre_hop_constraints(rec.tyre_fz_n[..., keep], static_load_n,
+                                         load_fraction)
+        out['g_soft'] = soft[:, [0, 0, 1, 1]]
+    return out
 
 
 def derivative_numpy(

@@ -1,0 +1,114 @@
+"""The first-order (secant) correction of simplified gradients, and the smooth tyre-hop
+measure it is used with."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from suspension_tuning.optim.correction import (
+    CorrectionOptions,
+    SecantCorrection,
+    load_correction_options,
+)
+from suspension_tuning.tuning import FullEvaluation, TuningRequest, optimise
+from suspension_tuning.vehicle.metrics import soft_tyre_hop_constraints, tyre_hop_constraints
+from suspension_tuning.vehicle.simplified import run_simplified
+
+CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'optimiser.yaml'
+
+
+def test_secant_updates_recover_a_linear_discrepancy_along_orthogonal_steps():
+    # D(x) = A x + d0: Broyden's update makes C s = y along each step and leaves the
+    # directions orthogonal to it alone, so steps along the two axes give C = A exactly
+    # (hand: Broyden 1965, the rank-one update's secant and no-change conditions).
+    a = np.array([[1.0, -2.0], [0.5, 3.0], [0.0, 0.0]])
+    simp = np.array([0.0, 0.0, np.nan])  # the third row has no simplified model
+
+    def full(x):
+        return a @ x + np.array([0.2, -0.1, 7.0])
+
+    corr = SecantCorrection(3, 2, min_step=0.004)
+    for x in ([0.5, 0.5], [0.6, 0.5], [0.6, 0.3]):
+        corr.observe(np.array(x), full(np.array(x)), simp)
+    assert corr.n_updates == 2
+    np.testing.assert_allclose(corr.jacobian, a, atol=1e-12)
+    np.testing.assert_allclose(corr.correct(np.ones((3, 2))), a + 1.0, atol=1e-12)
+
+
+def test_a_step_shorter_than_min_step_does_not_update_the_correction():
+    corr = SecantCorrection(1, 2, min_step=0.004)
+    corr.observe(np.array([0.5, 0.5]), np.array([0.0]), np.array([0.0]))
+    # a 0.003 step (< 0.004) with a large change of the discrepancy: noise, not slope
+    assert not corr.observe(np.array([0.503, 0.5]), np.array([1.0]), np.array([0.0]))
+    assert corr.n_short_steps == 1 and np.all(corr.jacobian == 0.0)
+
+
+def test_config_section_equals_code_defaults_and_bad_options_are_named():
+    assert load_correction_options(str(CONFIG)) == CorrectionOptions()
+    with pytest.raises(ValueError, match='method'):
+        CorrectionOptions(method='kriging')
+    with pytest.raises(ValueError, match='unknown correction option'):
+        CorrectionOptions.from_mapping({'step': 0.1})
+
+
+# A constrained quadratic whose "simplified model" has the constraint's slope half as
+# steep as the full model's, as the scaled tyre-hop constraints at the ride optimum
+# (slope ratio 1.3-2.2).  min |x - (0.3, 0.7)|^2 s.t. 2 (x1 + x2) - 1.6 <= 0: the
+# projection onto x1 + x2 = 0.8 is x* = (0.2, 0.6), f* = 0.02 (hand calculation).
+TARGET = np.array([0.3, 0.7])
+X_STAR = np.array([0.2, 0.6])
+OPTIONS = {'xtol': 1e-6, 'ftol': 1e-10, 'maxiter': 40, 'gtol': 1e-6,
+           'surrogate_constraint_curvature': 'zero'}
+
+
+def full_model(points):
+    points = np.atleast_2d(points)
+    f = np.sum((points - TARGET) ** 2, axis=1)
+    g = np.column_stack([2.0 * (points.sum(axis=1) - 0.8), -np.ones(len(points))])
+    return FullEvaluation(f=f, g=g)
+
+
+def flat_simplified(x, inputs):
+    # the objective's slope exact, the constraint's half the full model's; the values
+    # at x follow the same (wrong) simplified model
+    values = np.r_[np.sum((x - TARGET) ** 2), x.sum() - 0.8, -1.0]
+    return 2.0 * (x - TARGET), np.array([[1.0, 1.0], [0.0, 0.0]]), values
+
+
+@pytest.mark.parametrize('method', ['secant', 'none'])
+def test_the_correction_makes_no_full_run_of_its_own(method):
+    request = TuningRequest('ride', 2, x0=[0.9, 0.9], gradient_source='simplified',
+                            options=OPTIONS, correction={'method': method})
+    result = optimise(request, full_model, flat_simplified)
+    # Section 2: one full run per evaluation, with or without the correction
+    assert result.n_full_runs == result.nfev
+    # 2n stencil runs and one at the iterate per gradient
+    assert result.n_simplified_runs == 5 * result.ngev
+    assert result.correction['method'] == method
+    if method == 'secant':
+        np.testing.assert_allclose(result.x_best, X_STAR, atol=1e-3)
+        assert result.best_feasible and result.correction['n_updates'] >= 1
+        # the learnt constraint row: the full slope 2 minus the simplified slope 1
+        np.testing.assert_allclose(result.correction['jacobian'][1], [1.0, 1.0], atol=0.05)
+
+
+def test_soft_tyre_hop_measure_by_hand():
+    # w = 0.5 x 4000 N = 2000 N; samples 0, 1000, 2000, 4000 N count 1, 0.5, 0, 0:
+    # mean 0.375, g = 10 (0.375 - 0.1) = 2.75; eq. 11 counts one sample in four:
+    # 10 (0.25 - 0.1) = 1.5
+    fz = np.array([[0.0, 1000.0, 2000.0, 4000.0]])
+    assert soft_tyre_hop_constraints(fz, np.array([4000.0]), 0.5)[0] == pytest.approx(2.75)
+    assert tyre_hop_constraints(fz, 0.002)[0] == pytest.approx(1.5)
+    with pytest.raises(ValueError, match='load_fraction'):
+        soft_tyre_hop_constraints(fz, np.array([4000.0]), 0.0)
+
+
+def test_the_smooth_measure_has_a_slope_where_eq_11_is_flat():
+    # At the 4-variable ride reference optimum, a 1e-4 step of the rear gas volume
+    # leaves the pitch-plane model's eq. 11 count of the rear tyre unchanged (99 % of
+    # such steps change nothing), while the smooth measure moves.
+    x = np.array([0.248, 0.974, 0.312, 1.0])
+    out = run_simplified('ride', np.array([x, x - [0.0, 0.0, 0.0, 1e-4]]), 4)
+    assert out['g'][0, 2] == out['g'][1, 2]
+    assert out['g_soft'][0, 2] != out['g_soft'][1, 2]
