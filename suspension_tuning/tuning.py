@@ -397,8 +397,17 @@ def optimise(request: TuningRequest, full_model: FullModel,
                              constraint_gradients, counter)
     n = request.n_vars
     lower, upper = np.full(n, X_LOWER), np.full(n, X_UPPER)
+    # The eq. 11 tyre-hop constraints (the scenario's own, and extra ones on another
+    # scenario's) are counts of samples: linearised at simplified-gradient iterates
+    # (DynamicQOptions.surrogate_constraint_curvature); smooth extra constraints are not.
+    extra_staircase = [c.quantity in TYRE_HOP_NAMES for c in request.constraints]
+
+    def staircase(m: int) -> list[bool]:
+        return [True] * (m - len(extra_staircase)) + extra_staircase
+
     opt = DynamicQ(request.start, lower, upper, request.options, history=history,
-                   gradient_source=request.gradient_source)
+                   gradient_source=request.gradient_source,
+                   surrogate_rule_constraints=staircase)
     correction_options = CorrectionOptions.from_mapping(request.correction)
     correct = request.gradient_source == 'simplified' and correction_options.method != 'none'
     correction: SecantCorrection | None = None

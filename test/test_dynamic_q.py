@@ -449,3 +449,19 @@ def test_a_single_short_step_does_not_stop_a_run_that_needs_two():
     assert [r['converge_count'] for r in two.history] == [0, 1, 2]
     with pytest.raises(ValueError, match='converge_iterations'):
         DynamicQOptions(converge_iterations=0)
+
+
+def test_curvatures_after_a_step_shorter_than_curvature_min_step_are_kept():
+    def wrong_f_slope(x, target):  # 30 % too steep: each interpolation gives another a
+        return 1.3 * 2.0 * (x - target), np.array([[1.0, 1.0]]), None
+
+    fresh = _drive({'maxiter': 6}, wrong_f_slope, 'full')
+    kept = _drive({'maxiter': 6, 'curvature_min_step': 10.0}, wrong_f_slope, 'full')
+    a_fresh = [r['curvature']['a'] for r in fresh.history[2:]]
+    a_kept = [r['curvature']['a'] for r in kept.history[2:]]
+    assert len(set(np.round(a_fresh, 12))) > 1
+    # every step is shorter than 10 (the box is [0, 1]^2): the first interpolated
+    # curvature (iteration 2) is kept from then on
+    assert a_kept == [a_kept[0]] * len(a_kept)
+    with pytest.raises(ValueError, match='curvature_min_step'):
+        DynamicQOptions(curvature_min_step=-1.0)

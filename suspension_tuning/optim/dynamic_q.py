@@ -170,6 +170,12 @@ class DynamicQOptions:
         model's slopes: where those slopes are off, b_j absorbs the mismatch
         divided by the step length squared, so it grows as 1/step and changes
         sign from one iteration to the next (module notes) [E].
+    curvature_min_step : float
+        After a step shorter than this (units of x) the curvatures are not
+        interpolated anew: the previous iteration's are kept.  Over a step much
+        shorter than the gradients' finite-difference step, the interpolation
+        divides the gradient's error by the step length [E: 0 (off) for analytic
+        problems].
     converge_iterations : int
         Number of consecutive iterations, each at a feasible point, that must
         pass the xtol or ftol test before the run stops; 1 stops on the first
@@ -194,6 +200,7 @@ class DynamicQOptions:
     surrogate_constraint_curvature: str = 'interpolate'
     surrogate_objective_curvature: str = 'interpolate'
     converge_iterations: int = 1
+    curvature_min_step: float = 0.0
     lfopc: Mapping[str, Any] | None = None
 
     def __post_init__(self) -> None:
@@ -219,6 +226,9 @@ class DynamicQOptions:
             raise ValueError(
                 f'curvature_cap must be > 0 (inf allowed), got {self.curvature_cap!r}'
             )
+        if not (np.isfinite(self.curvature_min_step) and self.curvature_min_step >= 0):
+            raise ValueError(f'curvature_min_step must be finite and >= 0, got '
+                             f'{self.curvature_min_step!r}')
         if self.surrogate_objective_curvature not in SURROGATE_OBJECTIVE_CURVATURES:
             raise ValueError(f'surrogate_objective_curvature must be one of '
                              f'{", ".join(SURROGATE_OBJECTIVE_CURVATURES)}, got '
@@ -498,6 +508,13 @@ class DynamicQ:
         ``counters() -> mapping`` of further counts (or counts that replace the
         driver's own, such as ``nfev``) stored in every record and in the result;
         :func:`minimize` reports the calls of the user's functions this way.
+    surrogate_rule_constraints : sequence of bool or callable, optional
+        Per inequality constraint: whether ``surrogate_constraint_curvature`` applies
+        to it (default: to every one); or ``rule(m) -> sequence`` of the m constraints,
+        for a caller that learns m from the first evaluation.  The vehicle problems
+        apply it to the eq. 11 tyre-hop constraints only: a count of samples is a staircase, whose
+        interpolated curvature measures the stairs; a smooth constraint (another
+        scenario's objective) keeps its interpolated curvature.
     """
 
     def __init__(
@@ -509,8 +526,11 @@ class DynamicQ:
         history: Sequence[Mapping[str, Any]] | None = None,
         gradient_source: str = 'user',
         counters: Callable[[], Mapping[str, Any]] | None = None,
+        surrogate_rule_constraints: (Sequence[bool] | Callable[[int], Sequence[bool]]
+                                     | None) = None,
     ) -> None:
         self.x0, self.lower, self.upper = _validate_problem(x0, lower, upper)
+        self._surrogate_rows = surrogate_rule_constraints
         self._extra_counters = counters
         self.options = DynamicQOptions.from_mapping(options)
         self.default_source = gradient_source
@@ -525,6 +545,7 @@ class DynamicQ:
         self._best: _Point | None = None
         self._least_violating: _Point | None = None
         self._converge_count = 0
+        self._last_curvature: tuple[float, Array, Array] | None = None
         self._current: _Point | None = None
         self._rho = self.options.rho0
         if history:
@@ -784,6 +805,12 @@ class DynamicQ:
             raise ValueError('history: the last record lacks field rho_next (move limit)')
         self._rho = float(last['rho_next'])
         self._converge_count = int(last.get('converge_count', 0))
+        for rec in reversed(records):
+            if rec.get('curvature'):
+                cv = rec['curvature']
+                self._last_curvature = (float(cv['a']), np.asarray(cv['b'], float),
+                                        np.asarray(cv['c'], float))
+                break
         for p in points:
             self._update_best(p)
 
@@ -842,13 +869,29 @@ class DynamicQ:
                     c = _curvature(ref.h, cur.h, cur.dh, dx, dx2, cap)
                     if cur.source in SURROGATE_SOURCES:
                         if opt.surrogate_constraint_curvature == 'zero':
-                            b, c = np.zeros(cur.g.size), np.zeros(cur.h.size)
+                            rows = self._surrogate_rows
+                            if rows is None:
+                                rows = np.ones(cur.g.size, bool)
+                            elif callable(rows):
+                                rows = rows(cur.g.size)
+                            rows = np.asarray(rows, dtype=bool)
+                            if rows.shape != b.shape:
+                                raise ValueError(
+                                    f'surrogate_rule_constraints has {rows.size} entries '
+                                    f'for {b.size} constraints')
+                            b = np.where(rows, 0.0, b)
+                            c = np.zeros(cur.h.size)
                         if opt.surrogate_objective_curvature == 'zero':
                             a = 0.0
                         elif opt.surrogate_objective_curvature == 'nonnegative':
                             a = max(a, 0.0)
+                    last = self._last_curvature
+                    if (math.sqrt(dx2) < opt.curvature_min_step and last is not None
+                            and last[1].shape == b.shape and last[2].shape == c.shape):
+                        a, b, c = last[0], last[1].copy(), last[2].copy()
                 else:
                     a, b, c = 0.0, np.zeros(cur.g.size), np.zeros(cur.h.size)
+            self._last_curvature = (a, np.asarray(b, float).copy(), np.asarray(c, float).copy())
             rho = self._rho
             x_new, sub = solve_subproblem(cur, rho, a, b, c, self.lower, self.upper, opt.lfopc)
             value = yield from self._request('evaluate', x_new)
