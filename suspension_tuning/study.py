@@ -15,9 +15,13 @@ vehicle) it runs
 * ``slsqp`` - SciPy SLSQP with its default gradients: 2-point forward differences
   with the absolute step sqrt(machine eps) = 1.49e-8 in normalised units, on the full
   model (n full runs per gradient);
-* ``reference`` - the reference optimum: a dense grid (2 variables: 41 x 41 by
-  default) or a coarse grid (4 variables: 7^4), then SLSQP polishes from the best grid
-  points and from every method's final point; the best feasible result.
+* ``reference`` - the reference optimum: by default the committed best known feasible
+  optimum on the fixed-step model (benchmarks/references.json,
+  :mod:`suspension_tuning.studies.method_benchmark`); with ``--search-references`` also a
+  search: a dense grid (2 variables: 41 x 41 by default) or a coarse grid (4 variables:
+  7^4), then SLSQP polishes from the best grid points and from every method's final
+  point, the best feasible result, or the committed one where that is lower.
+  ``--write-references OUT`` searches the references anew and writes them.
 
 All Dynamic-Q runs go through :func:`suspension_tuning.tuning.optimise`, the loop of the
 ROS coordinator.  Cost counting: every full-model run counts once; SLSQP's objective and
@@ -32,7 +36,8 @@ rosbag2-style bag per run under ``bags/`` (``/optimisation/run_config``,
 ``/optimisation/progress``, ``/optimisation/result``, as the graph records them), which
 ``inspect_bag`` reads.
 
-Run: ``.venv/bin/python -m suspension_tuning.study [--quick] [--out DIR]``.
+Run: ``.venv/bin/python -m suspension_tuning.study [--search-references [--quick]]
+[--out DIR]``.
 """
 
 from __future__ import annotations
@@ -153,6 +158,10 @@ class StudyRun:
         Bag folder ('' when not recorded).
     details : dict
         Method-specific facts (reference: grid size, grid best, polish results).
+    evaluations : list of dict
+        SLSQP: every design it evaluated, in order (finite-difference points included),
+        as history entries whose ``n_full_runs`` counts the runs up to it; empty for
+        the other methods (their history holds every iterate).
     """
 
     scenario: str
@@ -180,6 +189,7 @@ class StudyRun:
     f_fixed_step: float = math.nan
     gap_to_fixed_reference_pct: float = math.nan
     max_violation_fixed_step: float = math.nan
+    evaluations: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def full_runs_with_calibration(self) -> int:
@@ -494,6 +504,7 @@ def run_slsqp(
     eps: float = SLSQP_EPS,
     integrator: str | None = None,
     method: str = 'slsqp',
+    x0: ArrayLike | None = None,
 ) -> tuple[StudyRun, _Recorder]:
     """SciPy SLSQP with its finite differences on the full model.
 
@@ -501,12 +512,13 @@ def run_slsqp(
     (default SciPy's sqrt(machine eps) = 1.49e-8, normalised units), n full runs per
     gradient; the objective and the constraints at one x share one full run
     (:class:`FullModelCache`).  ``method`` names the row ('slsqp' or
-    'slsqp_best_fd').
+    'slsqp_best_fd'); ``x0`` replaces the named ``start`` (which then only labels the
+    run).  Every evaluated design is kept in order in ``evaluations``.
     """
     model = FullModelCache(scenario, n_vars, integrator)
     recorder = _Recorder(record)
     history: list[dict[str, Any]] = []
-    x0 = start_point(start, n_vars)
+    x0 = start_point(start, n_vars) if x0 is None else validate_design(x0, n_vars)[0]
 
     add = _recording(model, history, recorder)
 
@@ -540,6 +552,10 @@ def run_slsqp(
             'ftol': 1e-6,
             'integrator': integrator_name(integrator),
         },
+        evaluations=[
+            {'n_full_runs': k + 1, 'f': fk, 'max_violation': max_violation(gk),
+             'x': np.frombuffer(key).tolist()}
+            for k, (key, (fk, gk)) in enumerate(model.values.items())],
     )
     return run, recorder
 
@@ -767,6 +783,62 @@ def compare_to_reference(runs: Sequence[StudyRun], reference: StudyRun) -> None:
         run.gap_to_reference_pct = 100.0 * (run.f - reference.f) / abs(reference.f)
 
 
+def committed_reference_run(committed: Any, integrator: str | None = 'fixed_step',
+                            record: bool = True) -> tuple[StudyRun, _Recorder]:
+    """A committed reference optimum as the study's reference row (one full run).
+
+    ``committed`` is a :class:`~suspension_tuning.studies.method_benchmark.Reference`
+    (fixed-step model).  Its design is run once on ``integrator``: on the fixed-step
+    model the row keeps the committed f and g (``details['f_rerun']`` is the run's,
+    equal unless the model changed since the file was written); on another model the
+    row holds that model's f and g at the committed design.
+    """
+    model = FullModelCache(committed.scenario, committed.n_vars, integrator)
+    recorder = _Recorder(record)
+    history: list[dict[str, Any]] = []
+    t0 = time.perf_counter()
+    x = validate_design(committed.x, committed.n_vars)[0]
+    f_run, g_run = model(x)
+    _recording(model, history, recorder)(x)
+    on_fixed = integrator_name(integrator) == 'fixed_step'
+    f, g = (committed.f, list(committed.g)) if on_fixed else (f_run, g_run.tolist())
+    message = ('committed reference (best known on the fixed-step model)' if on_fixed else
+               'committed fixed-step reference design, run on this model (not searched)')
+    run = StudyRun(
+        scenario=committed.scenario, n_vars=committed.n_vars, start='-', method='reference',
+        calibration_samples=0, x=x.tolist(), f=float(f), g=[float(v) for v in g],
+        max_violation=max_violation(g), iterations=0, n_full_runs=model.n_runs,
+        n_simplified_runs=0, n_calibration_runs=0, wall_time_s=time.perf_counter() - t0,
+        success=True, message=message, history=history,
+        details={'committed': True, 'found_by': committed.found_by,
+                 'committed_f': committed.f, 'f_rerun': f_run,
+                 'gtol': 1e-3, 'integrator': integrator_name(integrator)},
+    )
+    return run, recorder
+
+
+def best_known_reference(reference: StudyRun, committed: Any,
+                         log: Callable[[str], None] = print) -> None:
+    """Make a searched fixed-step reference the best known one, in place.
+
+    The committed reference replaces the searched point when it is feasible (max g <=
+    1e-3) and lower; ``details`` records the committed f and which one is used.  A
+    search that ends lower is said so: it may replace the committed entry
+    (``--write-references``).
+    """
+    reference.details['committed_f'] = committed.f
+    if max_violation(committed.g) <= 1e-3 and committed.f < reference.f:
+        reference.details['searched_f'] = reference.f
+        reference.x, reference.f = list(committed.x), float(committed.f)
+        reference.g = [float(v) for v in committed.g]
+        reference.max_violation = max_violation(reference.g)
+        reference.message += ' (the committed reference is lower and is used)'
+    elif reference.f < committed.f:
+        log(f'  {reference.scenario}_{reference.n_vars}var: the search found f = '
+            f'{reference.f:.6f}, lower than the committed {committed.f:.6f} (write it with '
+            f'--write-references)')
+
+
 def run_case(
     scenario: str,
     n_vars: int,
@@ -779,8 +851,17 @@ def run_case(
     integrator: str | None = None,
     best_fd_step: float | None = None,
     fixed_reference: bool = False,
+    committed: Any = None,
+    search_references: bool = True,
 ) -> dict[str, Any]:
     """All methods on one scenario and number of variables, from every start point.
+
+    ``committed`` is the case's committed reference optimum on the fixed-step model
+    (:class:`~suspension_tuning.studies.method_benchmark.Reference`).  Without
+    ``search_references`` it is the reference (a noisy study also runs its design on
+    the variable-step model, as the noisy model's reference row) and nothing is
+    searched; with it the searches below run and the fixed-step reference is the better
+    of the search's and the committed one (the best known).
 
     With ``best_fd_step`` SLSQP also runs with that forward-difference step
     ('slsqp_best_fd', see :func:`noise_optimal_fd_step`), and the reference's polish
@@ -843,11 +924,19 @@ def run_case(
             f'{run.n_full_runs} full + {run.n_calibration_runs} calibration runs, '
             f'{run.wall_time_s:.1f} s'
         )
-    reference, ref_recorder = reference_optimum(
-        scenario, n_vars, grid_points, [r.x for r, _ in runs], record=record,
-        integrator=integrator,
-        polish_eps=slsqp_eps if best_fd_step is None else best_fd_step,
-    )  # fmt: skip
+    if not search_references and committed is None:
+        raise ValueError(f'{scenario}, {n_vars} variables: no committed reference; search '
+                         'one (--search-references)')
+    if search_references:
+        reference, ref_recorder = reference_optimum(
+            scenario, n_vars, grid_points, [r.x for r, _ in runs], record=record,
+            integrator=integrator,
+            polish_eps=slsqp_eps if best_fd_step is None else best_fd_step,
+        )  # fmt: skip
+        if committed is not None and not fixed_reference:
+            best_known_reference(reference, committed, log)
+    else:
+        reference, ref_recorder = committed_reference_run(committed, integrator, record)
     log(
         f'  {scenario}_{n_vars}var reference: f = {reference.f:.6f} '
         f'({reference.message}, {reference.n_full_runs} full runs, '
@@ -856,7 +945,9 @@ def run_case(
     runs.append((reference, ref_recorder))
     compare_to_reference([r for r, _ in runs], reference)
     fixed_ref = None
-    if fixed_reference:
+    if fixed_reference and not search_references:
+        fixed_ref, _ = committed_reference_run(committed, 'fixed_step', record=False)
+    if fixed_reference and search_references:
         finals = np.array([r.x for r, _ in runs])
         # Dynamic-Q with full-model gradients on the fixed-step model (see
         # FIXED_REFERENCE_GRID): its final designs are starts of the fixed reference.
@@ -870,6 +961,10 @@ def run_case(
         fixed_ref.n_full_runs += sum(r.n_full_runs for r in fixed_dq)
         fixed_ref.details['dq_full_fixed_step_f'] = [r.f for r in fixed_dq]
         fixed_ref.message += ' and Dynamic-Q (full gradients, fixed-step model)'
+        if committed is not None:
+            best_known_reference(fixed_ref, committed, log)
+    if fixed_ref is not None:
+        finals = np.array([r.x for r, _ in runs])
         log(f'  {scenario}_{n_vars}var fixed-step reference: f = {fixed_ref.f:.6f} '
             f'({fixed_ref.n_full_runs} full runs, {fixed_ref.wall_time_s:.1f} s)')
         fixed = run_scenario(scenario, finals, n_vars=n_vars, integrator='fixed_step')
@@ -1038,6 +1133,10 @@ def _fmt(value: float, digits: int = 4) -> str:
     return f'{value:.{digits}f}' if math.isfinite(value) else '-'
 
 
+def _fmt_g(value: float) -> str:
+    return f'{value:.3g}' if math.isfinite(value) else '-'
+
+
 def markdown_tables(cases: Sequence[dict[str, Any]], calibration_samples: Sequence[int]) -> str:
     """The study's Markdown: the run table, settings against baseline, cost ratios."""
     lines = [
@@ -1133,6 +1232,19 @@ def markdown_tables(cases: Sequence[dict[str, Any]], calibration_samples: Sequen
     for case in cases:
         ref = case['reference']
         d = ref.details
+        if d.get('committed'):
+            lines.append(
+                f'- {ref.scenario}, n = {ref.n_vars}: committed reference (best known, '
+                f'fixed-step model) f = {ref.f:.5f} at x = {np.round(ref.x, 3).tolist()}, '
+                f'found by {d["found_by"]}; the design re-run now: f = {d["f_rerun"]:.5f}.'
+            )
+            continue
+        if 'committed_f' in d:
+            used = 'used: lower than the search' if 'searched_f' in d else 'not lower'
+            lines.append(
+                f'- {ref.scenario}, n = {ref.n_vars}: committed reference f = '
+                f'{d["committed_f"]:.5f} ({used}).'
+            )
         lines.append(
             f'- {ref.scenario}, n = {ref.n_vars}: grid {d["grid_points_per_axis"]}^{ref.n_vars} '
             f'({d["grid_runs"]} full runs, spacing {d["grid_spacing"]:.4f}) best f = '
@@ -1189,8 +1301,15 @@ def run_study(
     log: Callable[[str], None] = print,
     slsqp_eps: float = SLSQP_EPS,
     integrator: str | None = None,
+    search_references: bool = False,
+    references: str | Path | None = None,
 ) -> dict[str, Any]:
     """Run every case, write the tables, plots, JSON and bags under ``out``.
+
+    The reference of each case is the committed one (``references``, default
+    benchmarks/references.json: the best known feasible optimum on the fixed-step
+    model); with ``search_references`` the reference searches run as well and the
+    better of the two is used (see :func:`run_case`).
 
     With ``integrator='variable_step'`` the study runs on the noisy variable-step full
     model: SLSQP also with the noise-optimal step (:func:`noise_optimal_fd_step`), the
@@ -1215,6 +1334,21 @@ def run_study(
     if not calibration_samples or min(calibration_samples) < 2:
         raise ValueError(f'calibration sample counts must be >= 2, got {calibration_samples}')
     grid_points = {**GRID_POINTS, **(grid_points or {})}
+    from suspension_tuning.studies import method_benchmark as mb
+
+    try:
+        committed = mb.load_references(references)
+    except FileNotFoundError as error:
+        if not search_references:
+            raise ValueError(f'{error}, or search them with --search-references') from None
+        committed = {}
+    if not search_references:
+        missing = [mb.case_key(s, n) for s in scenarios for n in n_vars_list
+                   if mb.case_key(s, n) not in committed]
+        if missing:
+            raise ValueError(f'no committed reference for {", ".join(missing)}; search them '
+                             f'with --search-references or write them with '
+                             f'{mb.REFERENCES_COMMAND}')
     t0 = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -1243,6 +1377,8 @@ def run_study(
                 integrator=integrator,
                 best_fd_step=None if step is None else step['step'],
                 fixed_reference=noisy,
+                committed=committed.get(mb.case_key(scenario, n)),
+                search_references=search_references,
             )
             case['fd_step_search'] = step
             cases.append(case)
@@ -1252,16 +1388,28 @@ def run_study(
                               out / 'plots' / f'{tag}{scenario}_{n}var_{start}.png')
                 )  # fmt: skip
     wall = time.perf_counter() - t0
+    grids = ', '.join(f'{grid_points[n]}^{n}' for n in n_vars_list)
+    source = references or 'benchmarks/references.json'
+    if search_references:
+        ref_text = (f'reference grids {grids} then SLSQP polish'
+                    + (', on each model' if noisy else '')
+                    + f'; the committed fixed-step reference ({source}) where that is lower')
+    elif noisy:
+        ref_text = (f'references: the committed best known fixed-step optima ({source}); the '
+                    "noisy model's reference row is the committed design run on the noisy "
+                    'model, not a search (`--search-references` searches both)')
+    else:
+        ref_text = (f'references: the committed best known optima ({source}, fixed-step '
+                    'model; `--search-references` searches them again)')
     if noisy:
-        return _write_noisy(out, cases, calibration_samples, grid_points, n_vars_list,
-                            slsqp_eps, wall, plots)  # fmt: skip
+        return _write_noisy(out, cases, calibration_samples, ref_text, slsqp_eps, wall,
+                            plots)
     text = (
         f'# Method study: simplified-model gradients against full-model gradients\n\n'
         f'Generated by `study` in {wall:.0f} s.  Dynamic-Q: config/optimiser.yaml '
         f'`vehicle` options, central-difference half step {FD_STEP} (simplified and full '
         f'gradients); SLSQP: SciPy defaults (maxiter 100, ftol 1e-6), 2-point forward '
-        f'differences with step {slsqp_eps:.3g}; reference grids '
-        f'{", ".join(f"{grid_points[n]}^{n}" for n in n_vars_list)} then SLSQP polish.  '
+        f'differences with step {slsqp_eps:.3g}; {ref_text}.  '
         f'Distances in normalised units (0.001..1 per variable); f gap = '
         f'100 (f - f_ref) / |f_ref|.\n\n' + markdown_tables(cases, calibration_samples)
     )
@@ -1299,7 +1447,7 @@ def noisy_markdown(cases: Sequence[dict[str, Any]], calibration_samples: Sequenc
             )
             iters = '-' if r.method == 'reference' else str(r.iterations)
             lines.append(
-                f'| {r.scenario} | {r.n_vars} | {r.start} | {r.method} | {cal} | {step:.3g} | '
+                f'| {r.scenario} | {r.n_vars} | {r.start} | {r.method} | {cal} | {_fmt_g(step)} | '
                 f'{r.f:.5f} | {r.gap_to_reference_pct:+.3f} | {r.f_fixed_step:.5f} | '
                 f'{r.gap_to_fixed_reference_pct:+.3f} | {r.max_violation:.3g} | '
                 f'{r.max_violation_fixed_step:.3g} | {iters} | '
@@ -1332,8 +1480,10 @@ def noisy_markdown(cases: Sequence[dict[str, Any]], calibration_samples: Sequenc
     lines += ['', '**Reference optima and the forward-difference step**', '']
     for case in cases:
         ref, fref, st = case['reference'], case['fixed_reference'], case['fd_step_search']
+        noisy_ref = ('the committed fixed-step reference design on the noisy model (no '
+                     'noisy-model search)' if ref.details.get('committed') else 'noisy model')
         lines.append(
-            f'- {ref.scenario}, n = {ref.n_vars}: noisy model f = {ref.f:.5f} at x = '
+            f'- {ref.scenario}, n = {ref.n_vars}: {noisy_ref} f = {ref.f:.5f} at x = '
             f'{np.round(ref.x, 3).tolist()} ({ref.n_full_runs} full runs); fixed-step '
             f'model f = {fref.f:.5f} at x = {np.round(fref.x, 3).tolist()} '
             f'({fref.n_full_runs} full runs).  Forward-difference step: noise '
@@ -1345,18 +1495,16 @@ def noisy_markdown(cases: Sequence[dict[str, Any]], calibration_samples: Sequenc
     return '\n'.join(lines) + '\n'
 
 
-def _write_noisy(out: Path, cases: list, calibration_samples: Sequence[int],
-                 grid_points: dict[int, int], n_vars_list: Sequence[int], slsqp_eps: float,
-                 wall: float, plots: list) -> dict[str, Any]:  # fmt: skip
+def _write_noisy(out: Path, cases: list, calibration_samples: Sequence[int], ref_text: str,
+                 slsqp_eps: float, wall: float, plots: list) -> dict[str, Any]:
     text = (
         '# Method study on the variable-step (noisy) full model\n\n'
         f'Generated by `study --integrator variable_step` in {wall:.0f} s.  Full model: '
         'Dormand-Prince 5(4), config/vehicle.yaml integration.variable_step.  '
         f'Dynamic-Q: config/optimiser.yaml `vehicle`, half step {FD_STEP}; SLSQP: maxiter '
         f'100, ftol 1e-6, forward differences with {slsqp_eps:.3g} (slsqp) and the '
-        'noise-optimal step (slsqp_best_fd); reference grids '
-        f'{", ".join(f"{grid_points[n]}^{n}" for n in n_vars_list)} then SLSQP polish, '
-        'on each model.\n\n' + noisy_markdown(cases, calibration_samples)
+        f'noise-optimal step (slsqp_best_fd); {ref_text}.\n\n'
+        + noisy_markdown(cases, calibration_samples)
     )
     (out / 'method_study_noisy.md').write_text(text)
     _write_results(out / 'results_noisy.json', cases, wall, lambda c: {
@@ -1364,6 +1512,35 @@ def _write_noisy(out: Path, cases: list, calibration_samples: Sequence[int],
         'fixed_reference': asdict(c['fixed_reference']),
         'ratios': {str(s): noisy_ratios(c, s) for s in calibration_samples}})
     return {'cases': cases, 'markdown': text, 'plots': plots, 'wall_time_s': wall}
+
+
+def write_reference_file(path: Path, scenarios: Sequence[str], n_vars_list: Sequence[int],
+                         grid_points: dict[int, int]) -> int:
+    """Search every case's fixed-step reference optimum and write them to ``path``.
+
+    See :func:`suspension_tuning.studies.method_benchmark.search_reference`; an entry
+    already in ``path`` stays when it is feasible and at least as low (the file holds
+    the best known).
+    """
+    from suspension_tuning.studies import method_benchmark as mb
+
+    t0 = time.perf_counter()
+    refs = []
+    for scenario in scenarios:
+        for n in n_vars_list:
+            print(f'== {scenario}, {n} variables: reference search', flush=True)
+            ref = mb.search_reference(scenario, n, grid_points[n],
+                                      log=lambda s: print(s, flush=True))
+            print(f'  {ref.key}: f = {ref.f:.6f} at x = {np.round(ref.x, 4).tolist()}, max '
+                  f'violation {ref.max_violation:.3g} ({ref.search["full_runs"]} full runs, '
+                  f'{ref.search["wall_time_s"]:.0f} s)', flush=True)
+            refs.append(ref)
+    status = mb.write_references(path, refs)
+    for key, what in status.items():
+        print(f'{key}: {what}')
+    print(f'references: {path}')
+    print(f'references_wall_time_s: {time.perf_counter() - t0:.1f}')
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -1397,7 +1574,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         '--quick',
         action='store_true',
         help=f'coarse reference grids ({QUICK_GRID_POINTS[2]} and '
-        f'{QUICK_GRID_POINTS[4]} per axis): a smoke run',
+        f'{QUICK_GRID_POINTS[4]} per axis) for --search-references and '
+        '--write-references: a smoke run',
     )
     parser.add_argument(
         '--slsqp-eps',
@@ -1406,6 +1584,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="SLSQP forward-difference step, normalised (default SciPy's 1.49e-8)",
     )
     parser.add_argument('--no-bags', action='store_true', help='do not record bags')
+    parser.add_argument(
+        '--references', default=None, metavar='FILE',
+        help='the committed reference optima (default benchmarks/references.json)',
+    )
+    parser.add_argument(
+        '--search-references', action='store_true',
+        help='search the reference optima too (grid then SLSQP polish, ~10 min per ride '
+        'case); the gaps are to the better of the search and the committed reference',
+    )
+    parser.add_argument(
+        '--write-references', default=None, metavar='OUT',
+        help='instead: search the reference optimum of every case on the fixed-step model '
+        '(the grid, then SLSQP polish from its best points and from the designs of '
+        'Dynamic-Q with full and with simplified gradients from the 6 benchmark starts) '
+        'and write OUT, keeping any lower committed entry (~20-40 min)',
+    )
     parser.add_argument(
         '--pareto',
         action='store_true',
@@ -1447,6 +1641,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         grid[2] = args.grid_2
     if args.grid_4 is not None:
         grid[4] = args.grid_4
+    if args.write_references:
+        return write_reference_file(Path(args.write_references), args.scenarios, args.n_vars,
+                                    grid)
     try:
         study = run_study(
             Path(args.out),
@@ -1459,6 +1656,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             log=lambda s: print(s, flush=True),
             slsqp_eps=args.slsqp_eps,
             integrator=args.integrator,
+            search_references=args.search_references,
+            references=args.references,
         )
     except ValueError as error:
         print(f'study: {error}', file=sys.stderr)
