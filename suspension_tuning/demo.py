@@ -50,7 +50,7 @@ def optimiser_stopped(message: str) -> bool:
     from suspension_tuning.reported_design import stop_message
 
     own = {STATUS_MESSAGES[k] for k in STATUS_MESSAGES if k != 99}
-    return stop_message(message).removesuffix(' (final point infeasible)') in own
+    return stop_message(message).removesuffix(' (last iterate infeasible)') in own
 
 
 def report(scenario: str, result, baseline_f: float, baseline_x: np.ndarray) -> str:

@@ -11,7 +11,7 @@ def test_demo_reports_an_optimiser_stop_and_fails_on_anything_else():
     # result adds at an infeasible final point
     assert optimiser_stopped('converged: step shorter than xtol')
     assert optimiser_stopped(
-        'stopped: maximum number of iterations reached (final point infeasible)'
+        'stopped: maximum number of iterations reached (last iterate infeasible)'
     )
     assert optimiser_stopped('stopped: move limit below rho_min at an infeasible point')
     # stopped from outside, or no optimisation at all: the demo failed
@@ -23,7 +23,7 @@ def test_demo_reports_an_optimiser_stop_and_fails_on_anything_else():
 def test_demo_reads_the_optimiser_stop_after_the_sentence_on_the_reported_design():
     # the coordinator's result message: the reported design, then Dynamic-Q's stop
     assert optimiser_stopped('best feasible design: iteration 29; Dynamic-Q stopped: '
-                             'maximum number of iterations reached (final point infeasible)')
+                             'maximum number of iterations reached (last iterate infeasible)')
     assert optimiser_stopped('no feasible design found: the reported design is the least '
                              'violating one (max g = 0.0444), iteration 4; Dynamic-Q '
                              'stopped: move limit below rho_min at an infeasible point')
@@ -40,7 +40,7 @@ def test_demo_report_says_when_no_design_was_feasible():
     result = Optimise.Result(
         success=False, message='no feasible design found: the reported design is the least '
         'violating one (max g = 0.0444), iteration 4; Dynamic-Q stopped: maximum number of '
-        'iterations reached (final point infeasible)', x=[0.5, 0.5, 0.5, 0.5], f=0.1,
+        'iterations reached (last iterate infeasible)', x=[0.5, 0.5, 0.5, 0.5], f=0.1,
         g=[0.0444, -0.1, -0.1, -0.1], feasible=False, best_iteration=4, max_violation=0.0444,
         physical_names=names, physical_values=[1.5, 0.35, 1.5, 0.35], iterations=30)
     base_x = np.full(4, 0.5005)  # the centre; only its physical settings are printed

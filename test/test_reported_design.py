@@ -63,7 +63,7 @@ def test_the_action_result_reports_the_feasible_start_when_the_last_iterate_is_i
     assert msg.feasible and msg.best_iteration == 0 and msg.max_violation == 0.0
     assert list(msg.physical_values) == list(physical_settings([START, START]).values())
     assert msg.message == ('best feasible design: iteration 0; Dynamic-Q '
-                           f'{MAXITER_STOP} (final point infeasible)')
+                           f'{MAXITER_STOP} (last iterate infeasible)')
     assert not msg.success  # Dynamic-Q stopped on its iteration limit, not converged
     # nothing is lost: the last iterate is the history's last record (iterations 0, 1)
     assert [r.iteration for r in msg.history] == [0, 1]
@@ -85,7 +85,7 @@ def test_no_feasible_design_is_said_plainly_and_the_least_violating_one_is_repor
     assert msg.max_violation == pytest.approx(START + 0.25)
     assert msg.message == ('no feasible design found: the reported design is the least '
                            'violating one (max g = 0.7505), iteration 0; Dynamic-Q '
-                           f'{MAXITER_STOP} (final point infeasible)')
+                           f'{MAXITER_STOP} (last iterate infeasible)')
 
 
 def test_reported_design_reads_the_best_point_fields_and_none_without_them():

@@ -66,8 +66,10 @@ published rules as recalled [R]; the analytic tests decide):
   zig-zagged along the tyre-hop boundary.  With 'zero' the constraints are
   linearised (b_j = c_k = 0) at iterates with such gradients; the objective
   keeps its interpolated curvature a.
-* A run stops only after ``converge_iterations`` consecutive iterations at
-  feasible points pass the xtol or ftol test: on a noisy model one short step
+* A run stops only after ``converge_iterations`` consecutive iterations pass
+  the xtol or ftol test, each at a feasible point or within xtol of the best
+  feasible point (on a staircase constraint the iterates can alternate between
+  a feasible point and an infeasible one a stair away): on a noisy model one short step
   (the subproblem's solution close to x^i) or one small change of f proves
   nothing, and a single-step rule ended one ride run 64 % above its optimum.
 * The iterate is clipped into the bounds after each subproblem (LFOPC's
@@ -177,8 +179,9 @@ class DynamicQOptions:
         divides the gradient's error by the step length [E: 0 (off) for analytic
         problems].
     converge_iterations : int
-        Number of consecutive iterations, each at a feasible point, that must
-        pass the xtol or ftol test before the run stops; 1 stops on the first
+        Number of consecutive iterations, each at a feasible point or within
+        xtol of the best feasible point, that must pass the xtol or ftol test
+        before the run stops; 1 stops on the first
         [E: 1 for analytic problems; 2 for noisy ones, where one short step
         or one lucky function change proves nothing].
     lfopc : dict
@@ -625,7 +628,7 @@ class DynamicQ:
             success=bool(status in (0, 1, 2) and feasible),
             status=status,
             message=self.message
-            + ('' if feasible or status is None else ' (final point infeasible)'),
+            + ('' if feasible or status is None else ' (last iterate infeasible)'),
             nit=self._iteration(),
             iterations=self._iteration(),
             rho=self._rho,
@@ -914,8 +917,13 @@ class DynamicQ:
             df_change = abs(new.f - cur.f)
             f_scale = 1.0 + abs(cur.f)
             small = step < opt.xtol or df_change < opt.ftol * f_scale
-            feasible_after = self._feasible(new if accepted else cur)
-            self._converge_count = self._converge_count + 1 if small and feasible_after else 0
+            kept = new if accepted else cur
+            # a converged iterate is feasible, or within xtol of the best feasible point:
+            # on a staircase constraint (eq. 11) the run can alternate between a feasible
+            # point and an infeasible one one stair away
+            settled = self._feasible(kept) or (
+                self._best is not None and np.linalg.norm(self._best.x - kept.x) < opt.xtol)
+            self._converge_count = self._converge_count + 1 if small and settled else 0
             curvature = {'a': a, 'b': np.asarray(b).copy(), 'c': np.asarray(c).copy()}
             subinfo = {
                 'nsteps': sub.nsteps,
@@ -938,7 +946,7 @@ class DynamicQ:
                 self._current = cur
             else:
                 ref = new
-            if self._feasible(cur) and self._converge_count >= opt.converge_iterations:
+            if self._converge_count >= opt.converge_iterations:
                 self.status = 0 if step < opt.xtol else 1
                 break
             if opt.rho_min > 0 and self._rho < opt.rho_min:
