@@ -70,6 +70,20 @@ def statement(feasible: bool, iteration: int, max_violation: float) -> str:
             f'(max g = {float(max_violation):.4g}), iteration {int(iteration)}')
 
 
+#: Dynamic-Q's status codes of a converged run (xtol, ftol, rho_min at a feasible point).
+CONVERGED_STATUSES = (0, 1, 2)
+
+
+def design_success(result: Mapping[str, Any], design: ReportedDesign | None) -> bool:
+    """A run succeeded when Dynamic-Q converged and the reported design is feasible.
+
+    Dynamic-Q's own ``success`` judges the last iterate (SciPy's ``x``); on the eq. 11
+    staircase a converged run may end one stair beyond the feasible point it reports.
+    """
+    return (design is not None and design.feasible
+            and result.get('status') in CONVERGED_STATUSES)
+
+
 def result_message(design: ReportedDesign | None, stop: str) -> str:
     """A result's message: the sentence on the reported design, then Dynamic-Q's stop.
 

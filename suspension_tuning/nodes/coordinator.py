@@ -44,7 +44,7 @@ from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.correction import load_correction_options
 from suspension_tuning.optim.dynamic_q import load_options
 from suspension_tuning.paths import config_dir, dump_yaml, read_yaml
-from suspension_tuning.reported_design import reported_design, result_message
+from suspension_tuning.reported_design import design_success, reported_design, result_message
 from suspension_tuning.tuning import (
     FullEvaluation,
     RunCounter,
@@ -116,7 +116,7 @@ def action_result(result: Any, history: list[IterationRecord], t0: float,
             wall_time_s=time.monotonic() - t0, **counter.as_dict())
     physical = physical_settings(design.x)
     return Optimise.Result(
-        success=bool(result.success) and design.feasible,
+        success=design_success(result, design),
         message=result_message(design, stop),
         x=design.x, f=design.f, g=design.g, feasible=design.feasible,
         best_iteration=design.iteration, max_violation=design.max_violation,
