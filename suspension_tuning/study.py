@@ -60,7 +60,12 @@ from scipy.optimize import minimize
 from suspension_tuning.optim.dynamic_q import load_options
 from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
 from suspension_tuning.paths import config_dir, dump_yaml
-from suspension_tuning.reported_design import ReportedDesign, reported_design, result_message
+from suspension_tuning.reported_design import (
+    ReportedDesign,
+    design_success,
+    reported_design,
+    result_message,
+)
 from suspension_tuning.tuning import (
     FullEvaluation,
     RunCounter,
@@ -415,7 +420,7 @@ def run_dynamic_q(
         n_calibration_runs=counter.calibration_runs,
         wall_time_s=wall,
         calibration_wall_time_s=calibration_wall_time_s,
-        success=bool(result.success) and design.feasible,
+        success=design_success(result, design),
         message=str(result.message),
         history=history,
         details={'optimiser_options': options, 'fd_step': FD_STEP,
