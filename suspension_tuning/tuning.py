@@ -7,6 +7,12 @@ on the full model (2n full runs per iteration) or from central differences on th
 eq. 25-scaled simplified models (2n cheap runs, "0.2n + 1 function evaluations per
 iteration").
 
+With simplified gradients the loop also corrects them (``TuningRequest.correction``,
+:mod:`suspension_tuning.optim.correction`): the full run at each iterate and the scaled
+simplified values at the same design (one more simplified run in the gradient's batch)
+give the discrepancy of the two models, whose Jacobian a secant update learns along the
+iterates, so the gradients follow the full model's slopes without an extra full run.
+
 :func:`optimise` drives :class:`~suspension_tuning.optim.dynamic_q.DynamicQ` with two
 callables, so the same loop runs in-process (physics called directly) and in the ROS
 coordinator (physics called through services on simulation workers and the gradient
