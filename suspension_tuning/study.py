@@ -1620,8 +1620,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         help='epsilon values of the Pareto front (default 8)',
     )
     parser.add_argument(
-        '--pareto-samples', type=int, default=30,
-        help='eq. 25 calibration samples per scenario of the Pareto study (default 30)',
+        '--pareto-samples', type=int, default=None,
+        help='eq. 25 calibration samples per scenario of the Pareto study (default '
+             'config/simplified_models.yaml scaling.n_samples, 16)',
     )
     parser.add_argument(
         '--integrator',

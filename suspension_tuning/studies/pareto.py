@@ -45,7 +45,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from suspension_tuning import evaluation
-from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
+from suspension_tuning.optim.simplified_gradient import (
+    SimplifiedGradient,
+    calibrate,
+    calibration_settings,
+)
 from suspension_tuning.paths import config_dir
 from suspension_tuning.tuning import TYRE_HOP_NAMES, ConstraintSpec, physical_settings
 from suspension_tuning.vehicle import metrics
@@ -60,8 +64,6 @@ Array = NDArray[np.float64]
 FRONT_POINTS = {2: 8, 4: 8}
 #: Start points of the single-objective optima (``study.start_point``).
 END_POINT_STARTS = ('centre', 'baseline')
-#: Eq. 25 calibration samples per scenario [P s.6.3.1: 30].
-CALIBRATION_SAMPLES = 30
 #: Paving length of the study's mixed runs, m [E]: 3 s of W_b settling plus 12 s of
 #: averaging at 65 km/h (271 m), the 12 s the ride scenario averages over; the 80 m of
 #: config/mixed.yaml leave 1.3 s after the settling time.
@@ -276,7 +278,7 @@ def best_iterate(runs: Sequence[Any], gtol: float) -> list[float]:
 
 
 def run_pareto(out: Path, n_vars: int = 4, n_points: int | None = None, bags: bool = True,
-               calibration_samples: int = CALIBRATION_SAMPLES,
+               calibration_samples: int | None = None,
                log: Callable[[str], None] = print) -> dict[str, Any]:
     """Run the study, write ``pareto.json``, ``pareto.png``, ``pareto.md`` and the bags.
 
@@ -290,8 +292,9 @@ def run_pareto(out: Path, n_vars: int = 4, n_points: int | None = None, bags: bo
         Epsilon values of the front (default :data:`FRONT_POINTS`).
     bags : bool
         Record every optimisation run as a bag.
-    calibration_samples : int
-        Eq. 25 calibration samples per scenario.
+    calibration_samples : int, optional
+        Eq. 25 calibration samples per scenario (default config/simplified_models.yaml
+        ``scaling.n_samples``).
     log : callable
         Progress lines.
 
@@ -312,6 +315,7 @@ def run_pareto(out: Path, n_vars: int = 4, n_points: int | None = None, bags: bo
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     gtol = float(vehicle_options()['gtol'])
+    calibration_samples, _ = calibration_settings(calibration_samples)
     gradients = {s: SimplifiedGradient(s, n_vars, calibrate(s, n_vars, calibration_samples))
                  for s in ('ride', 'handling')}
     log(f'calibrated both simplified models ({calibration_samples} samples each)')
