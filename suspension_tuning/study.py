@@ -1524,8 +1524,8 @@ def write_reference_file(path: Path, scenarios: Sequence[str], n_vars_list: Sequ
     """Search every case's fixed-step reference optimum and write them to ``path``.
 
     See :func:`suspension_tuning.studies.method_benchmark.search_reference`; an entry
-    already in ``path`` stays when it is feasible and at least as low (the file holds
-    the best known).
+    already in ``path`` stays when it is feasible and lower (the file holds the best
+    known).
     """
     from suspension_tuning.studies import method_benchmark as mb
 

@@ -169,7 +169,8 @@ def write_references(path: str | Path, references: Sequence[Reference],
     """Write reference optima to ``path``, keeping the best known of each case.
 
     With ``keep_better`` a case already in the file keeps its entry when that is
-    feasible and at least as low as the new one (the file holds the best known).
+    feasible and lower than the new one (the file holds the best known; an equal new
+    one replaces it, with its search's settings).
 
     Returns
     -------
@@ -185,11 +186,20 @@ def write_references(path: str | Path, references: Sequence[Reference],
             raise ValueError(f'{ref.key}: the reference is infeasible (max g = '
                              f'{ref.max_violation:.3g} > {REPORT_GTOL})')
         previous = old.get(ref.key)
-        if keep_better and previous is not None and previous.feasible and previous.f <= ref.f:
+        if keep_better and previous is not None and previous.feasible and previous.f < ref.f:
             status[ref.key] = 'kept'
             continue
         merged[ref.key] = ref
         status[ref.key] = 'replaced' if previous is not None else 'added'
+    def plain(value: Any) -> Any:  # strict JSON: a non-finite number becomes null
+        if isinstance(value, float) and not math.isfinite(value):
+            return None
+        if isinstance(value, dict):
+            return {k: plain(v) for k, v in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [plain(v) for v in value]
+        return value
+
     payload = {
         'description': (
             'Best known feasible optimum of each case on the fixed-step full model '
@@ -199,8 +209,7 @@ def write_references(path: str | Path, references: Sequence[Reference],
         'command': REFERENCES_COMMAND,
         'integrator': REFERENCE_INTEGRATOR,
         'feasibility_gtol': REPORT_GTOL,
-        'cases': {key: {k: v for k, v in asdict(ref).items()}
-                  for key, ref in sorted(merged.items())},
+        'cases': {key: plain(asdict(ref)) for key, ref in sorted(merged.items())},
     }
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(payload, indent=1) + '\n')
