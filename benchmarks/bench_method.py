@@ -53,8 +53,9 @@ and total full runs; then ``ride4_starts_within_1pct`` (target 6),
 ``ride4_max_final_violation`` (<= 0.005); the same with suffix ``_noisy`` (targets:
 median gap <= 1 %, max gap <= 2 %), plus ``ride4_max_final_violation_noisy_fixed_step``;
 the ratios and ``optimum_gap_pct`` (``..._noisy``: the noisy model's), and the wall time.
-About 15-20 min on 2 cores (a fixed-step run takes ~0.1 s; SLSQP's default runs take the
-most).
+About 12 min on 2 cores (717 s measured, the machine shared part of the time; a full
+run takes ~0.1 s, and SLSQP's default-step runs on the fixed-step model, up to ~1,000
+full runs from a start, take half of it).
 
 Run: .venv/bin/python benchmarks/bench_method.py
 """
