@@ -54,11 +54,13 @@ surrogate-based optimization with model hierarchies", AIAA 2004-4457.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from suspension_tuning.optim._options import options_from_mapping
 
 Array = NDArray[np.float64]
 
@@ -97,16 +99,7 @@ class CorrectionOptions:
     def from_mapping(cls, options: CorrectionOptions | Mapping[str, Any] | None
                      ) -> CorrectionOptions:
         """Build options from a mapping; unknown keys raise ValueError."""
-        if options is None:
-            return cls()
-        if isinstance(options, cls):
-            return options
-        known = {f.name for f in fields(cls)}
-        unknown = set(options) - known
-        if unknown:
-            raise ValueError(f'unknown correction option(s) {sorted(unknown)}; '
-                             f'known: {sorted(known)}')
-        return replace(cls(), **dict(options))
+        return options_from_mapping(cls, options, 'correction')
 
     def as_dict(self) -> dict[str, Any]:
         """The options as a plain dict (records, run configurations)."""

@@ -98,13 +98,14 @@ from __future__ import annotations
 import inspect
 import math
 from collections.abc import Callable, Generator, Iterable, Mapping, Sequence
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import Bounds, OptimizeResult
 
+from suspension_tuning.optim._options import options_from_mapping
 from suspension_tuning.optim.finite_diff import central_difference
 from suspension_tuning.optim.lfopc import LfopOptions, lfopc
 
@@ -249,20 +250,7 @@ class DynamicQOptions:
     @classmethod
     def from_mapping(cls, options: DynamicQOptions | Mapping[str, Any] | None) -> DynamicQOptions:
         """Build options from a mapping; unknown keys raise ValueError."""
-        if options is None:
-            return cls()
-        if isinstance(options, cls):
-            return options
-        known = {f.name for f in fields(cls)}
-        unknown = set(options) - known
-        if unknown:
-            raise ValueError(
-                f'unknown Dynamic-Q option(s) {sorted(unknown)}; known: {sorted(known)}'
-            )
-        values = dict(options)
-        if 'curvature_cap' in values:
-            values['curvature_cap'] = float(values['curvature_cap'])
-        return replace(cls(), **values)
+        return options_from_mapping(cls, options, 'Dynamic-Q', {'curvature_cap': float})
 
     def as_dict(self) -> dict[str, Any]:
         """Return the options as a plain dict (for records and logs)."""

@@ -59,10 +59,12 @@ Implementation notes
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from suspension_tuning.optim._options import options_from_mapping
 
 Array = NDArray[np.float64]
 
@@ -130,15 +132,7 @@ class LfopOptions:
     @classmethod
     def from_mapping(cls, options: LfopOptions | dict | None) -> LfopOptions:
         """Build options from a dict (unknown keys raise ValueError)."""
-        if options is None:
-            return cls()
-        if isinstance(options, cls):
-            return options
-        known = {f.name for f in fields(cls)}
-        unknown = set(options) - known
-        if unknown:
-            raise ValueError(f'unknown LFOP option(s) {sorted(unknown)}; known: {sorted(known)}')
-        return replace(cls(), **dict(options))
+        return options_from_mapping(cls, options, 'LFOP')
 
 
 @dataclass
