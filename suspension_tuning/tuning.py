@@ -230,6 +230,13 @@ class ConstraintSpec:
                              f'returned no metric {self.quantity!r}')
         return np.asarray(evaluation.metrics, float)[:, names.index(self.quantity)]
 
+    def simplified_value(self, values: Array) -> float:
+        """The quantity from a simplified model's values (f, then g FL..RR)."""
+        values = np.asarray(values, float)
+        if self.quantity == 'f':
+            return float(values[0])
+        return float(values[1 + TYRE_HOP_NAMES.index(self.quantity)])
+
     def derivative(self, df: Array, dg: Array) -> Array:
         """The quantity's row of a simplified gradient ``(df (n,), dg (4, n))``."""
         if self.quantity == 'f':
@@ -562,8 +569,7 @@ class _ConstraintTerms:
                 sdf, sdg, svalues = simplified[spec.scenario]
                 rows.append(spec.derivative(sdf, sdg))
                 row_values.append(math.nan if svalues is None else
-                                  float(spec.derivative(svalues[:1], svalues[1:, None])[0])
-                                  - spec.upper_bound)
+                                  spec.simplified_value(svalues) - spec.upper_bound)
             else:
                 rows.append(None)
                 row_values.append(math.nan)

@@ -112,3 +112,37 @@ def test_the_smooth_measure_has_a_slope_where_eq_11_is_flat():
     out = run_simplified('ride', np.array([x, x - [0.0, 0.0, 0.0, 1e-4]]), 4)
     assert out['g'][0, 2] == out['g'][1, 2]
     assert out['g_soft'][0, 2] != out['g_soft'][1, 2]
+
+
+def test_an_extra_constraint_with_a_simplified_model_is_corrected_too():
+    # min |x - (0.3, 0.7)|^2 s.t. f_other = x1 + x2 <= 0.8, where the other scenario's
+    # simplified model has half the full slope (and the values to match).  The secant
+    # learns the missing half on that row: x* = (0.2, 0.6) (hand, as above), and the
+    # row's learnt correction is the full slope 1 minus the simplified 0.5.
+    def own_model(points):
+        points = np.atleast_2d(points)
+        return FullEvaluation(f=np.sum((points - TARGET) ** 2, axis=1),
+                              g=-np.ones((len(points), 4)), inputs={'x': points[0]})
+
+    def own_gradient(x, inputs):
+        return 2.0 * (x - TARGET), np.zeros((4, 2)), np.r_[np.sum((x - TARGET) ** 2),
+                                                          -np.ones(4)]
+
+    def other_model(points):
+        points = np.atleast_2d(points)
+        return FullEvaluation(f=points.sum(axis=1), g=-np.ones((len(points), 4)),
+                              inputs={'x': points[0]})
+
+    def other_gradient(x, inputs):
+        return np.array([0.5, 0.5]), np.zeros((4, 2)), np.r_[0.5 * x.sum(), -np.ones(4)]
+
+    request = TuningRequest('ride', 2, x0=[0.9, 0.9], gradient_source='simplified',
+                            options=OPTIONS, constraints=[('handling', 'f_hand', 0.8)])
+    result = optimise(request, own_model, own_gradient,
+                      constraint_models={'handling': other_model},
+                      constraint_gradients={'handling': other_gradient})
+    np.testing.assert_allclose(result.x_best, X_STAR, atol=1e-3)
+    assert result.n_full_runs == 2 * result.nfev  # one run of each scenario per iterate
+    jac = np.asarray(result.correction['jacobian'])
+    assert jac.shape == (6, 2)  # f, 4 eq. 11 rows, the extra constraint
+    np.testing.assert_allclose(jac[5], [0.5, 0.5], atol=0.05)
