@@ -60,7 +60,10 @@ def resume(bag: str | os.PathLike[str], max_iterations: int | None = None,
                             config.get('constraints') or (),
                             # 'simulation default' (no integrator named) reads as ''
                             integrator=config.get('integrator')
-                            if config.get('integrator') in INTEGRATORS else '')
+                            if config.get('integrator') in INTEGRATORS else '',
+                            # a bag recorded before the correction existed ran without it;
+                            # a resumed run learns its correction anew from here on
+                            correction=config.get('gradient_correction') or {'method': 'none'})
     last = state['history'][-1]
     counter = RunCounter(full_runs=int(last['n_full_runs']),
                          simplified_runs=int(last['n_simplified_runs']))

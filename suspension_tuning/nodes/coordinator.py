@@ -237,6 +237,7 @@ class CoordinatorNode(Node):
             'scenario': request.scenario, 'n_vars': request.n_vars,
             'x0': request.start.tolist(), 'gradient_source': request.gradient_source,
             'optimiser_options': request.options, 'fd_step': request.fd_step,
+            'gradient_correction': dict(request.correction or {}),
             'constraints': [c.as_dict() for c in request.constraints],
             'constraint_gradient_sources': request.constraint_gradient_sources(),
             'integrator': request.integrator or 'simulation default',
