@@ -411,7 +411,33 @@ def test_session_keeps_a_finished_run_open_for_late_messages(tmp_path):
     assert session.write('/telemetry', serialize_message(String(data='late')),
                          t + second + second // 2) is None
     assert session.flush(now_ns=t + second + second // 2) is None  # grace not over
-    closed = session.flush(now_ns=t + 2 * second)  # grace over: closed by the timer
+    # the late message restarts the 1 s grace: still open 1 s after the result
+    assert session.flush(now_ns=t + 2 * second) is None
+    closed = session.flush(now_ns=t + 2 * second + second // 2)  # 1 s after the last one
     assert closed is not None
     topics = [m.topic for m in read_messages(closed).messages]
     assert topics == ['/optimisation/run_config', '/optimisation/result', '/telemetry']
+
+
+def test_session_closes_a_finished_run_at_post_run_max_s_whatever_still_arrives(tmp_path):
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from suspension_tuning.bag.recorder import RecordingSession
+
+    session = RecordingSession(tmp_path, per_run=True, pre_run_s=1.0, post_run_s=1.0,
+                               post_run_max_s=5.0)
+    for topic in ('/optimisation/run_config', '/telemetry', '/optimisation/result'):
+        session.add_topic(topic, 'std_msgs/msg/String')
+    t = 1_700_000_000_000_000_000
+    second = 1_000_000_000
+    session.write('/optimisation/run_config', serialize_message(String(data='scenario: ride')), t)
+    session.write('/optimisation/result', serialize_message(String(data='r')), t)
+    # a message every 0.5 s keeps the 1 s quiet grace from ever running out ...
+    for k in range(1, 10):
+        closed = session.write('/telemetry', serialize_message(String(data='x')),
+                               t + k * second // 2)
+        assert closed is None  # up to 4.5 s after the result
+    # ... until the 5 s cap: the message at 5 s finds the bag due and closes it first
+    assert session.write('/telemetry', serialize_message(String(data='x')),
+                         t + 5 * second) is not None

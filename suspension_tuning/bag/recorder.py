@@ -105,10 +105,14 @@ class RecordingSession:
         With ``per_run``: messages received up to this long (log time, s) before a
         run_config go into that run's bag.
     post_run_s : float
-        With ``per_run``: the run's bag stays open this long (log time, s) after its
-        result arrived, for messages of the run still queued on other topics (the
-        executor serves topics in no particular order; the optimum's telemetry is
-        published just before the result).
+        With ``per_run``: the run's bag stays open until no message has arrived for
+        this long (log time, s) after its result, for messages of the run still queued
+        on other topics (the executor serves topics in no particular order; the
+        reported design's telemetry is published just before the result, and on a
+        busy machine its burst takes longer than any fixed grace to drain).
+    post_run_max_s : float
+        With ``per_run``: the bag closes at the latest this long after the result,
+        whatever still arrives.
     """
 
     def __init__(
@@ -120,6 +124,7 @@ class RecordingSession:
         max_chunk_interval_s: float = DEFAULT_CHUNK_INTERVAL_S,
         pre_run_s: float = 1.0,
         post_run_s: float = 1.0,
+        post_run_max_s: float = 60.0,
     ) -> None:
         if pre_run_s < 0 or post_run_s < 0:
             raise ValueError(f'pre_run_s and post_run_s must not be negative, got '
@@ -135,7 +140,9 @@ class RecordingSession:
         self.dropped = 0
         self.pre_run_ns = int(pre_run_s * 1e9)
         self.post_run_ns = int(post_run_s * 1e9)
+        self.post_run_max_ns = int(max(post_run_max_s, post_run_s) * 1e9)
         self._close_at_ns: int | None = None
+        self._close_by_ns: int | None = None
         self._held: deque[tuple[str, bytes, int, int | None]] = deque()
         self._lock = threading.Lock()
 
@@ -166,7 +173,7 @@ class RecordingSession:
         return self.bag
 
     def _close_bag(self) -> Path | None:
-        self._close_at_ns = None
+        self._close_at_ns = self._close_by_ns = None
         if self.bag is None:
             return None
         path = self.bag.close()
@@ -175,9 +182,14 @@ class RecordingSession:
         return path
 
     def write(
-        self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None = None
+        self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None = None,
+        now_ns: int | None = None,
     ) -> Path | None:
         """Record one message; returns the path of a bag that this message closed, if any.
+
+        ``now_ns`` is when the message is processed (the clock of :meth:`flush`; default
+        ``log_time_ns``): a burst received before a run's result but processed after it
+        keeps the run's bag open ``post_run_s`` past its last message.
 
         Raises
         ------
@@ -220,7 +232,14 @@ class RecordingSession:
             if self.per_run and topic == RESULT_TOPIC:
                 if self.post_run_ns == 0:
                     return self._close_bag()
-                self._close_at_ns = log_time_ns + self.post_run_ns
+                now_ns = log_time_ns if now_ns is None else max(now_ns, log_time_ns)
+                self._close_at_ns = now_ns + self.post_run_ns
+                self._close_by_ns = now_ns + self.post_run_max_ns
+            elif self._close_at_ns is not None and self._close_by_ns is not None:
+                # a message of the finished run: wait post_run_s after the last one
+                now_ns = log_time_ns if now_ns is None else now_ns
+                self._close_at_ns = min(self._close_by_ns,
+                                        max(self._close_at_ns, now_ns + self.post_run_ns))
             return closed
 
     def _prune_held(self, now_ns: int) -> None:

@@ -204,7 +204,7 @@ class RecorderNode(Node):
         received = int(info.get('received_timestamp') or 0) or time.time_ns()
         sent = int(info.get('source_timestamp') or 0) or received
         try:
-            closed = self.session.write(topic, data, received, sent)
+            closed = self.session.write(topic, data, received, sent, now_ns=time.time_ns())
         except Exception as exc:  # noqa: BLE001 - never let one message stop the recorder
             self.get_logger().error(f'message on {topic} not recorded: {exc!r}')
             return
