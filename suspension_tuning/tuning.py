@@ -427,12 +427,13 @@ def optimise(request: TuningRequest, full_model: FullModel,
     # Full-model values at every evaluated design (the history's too, when resumed):
     # the correction compares them with the simplified values at the same design.
     evaluated = {np.asarray(r['x'], float).tobytes(): np.r_[float(r['f']), np.asarray(
-        r['g'], float)] for r in (history or ())}
+        r['g'], float)] for r in (history or ()) if correct}
     while (ask := opt.ask()) is not None:
         kind, x = ask
         if kind == 'evaluate':
             f, g = terms.evaluate(x)
-            evaluated[x.tobytes()] = np.r_[f, g]
+            if correct:
+                evaluated[x.tobytes()] = np.r_[f, g]
             record = opt.tell((f, g, None))
         elif request.gradient_source == 'full':
             def values(points: Array) -> Array:

@@ -805,9 +805,54 @@ class DynamicQ:
         for p in points:
             self._update_best(p)
 
+    def _curvatures(self, ref: _Point | None, cur: _Point) -> tuple[float, Array, Array]:
+        """Curvatures a, b, c of P[i] at ``cur`` from the reference point (module notes).
+
+        Zero at the first iteration; the previous iteration's after a step shorter
+        than ``curvature_min_step``; else Snyman and Hay's interpolation, with the
+        surrogate rules where the gradients at ``cur`` came from another model.
+        """
+        opt = self.options
+        zero = (0.0, np.zeros(cur.g.size), np.zeros(cur.h.size))
+        if ref is None:
+            return zero
+        dx = ref.x - cur.x
+        dx2 = float(dx @ dx)
+        if dx2 == 0.0:
+            return zero
+        last = self._last_curvature
+        if (math.sqrt(dx2) < opt.curvature_min_step and last is not None
+                and last[1].shape == (cur.g.size,) and last[2].shape == (cur.h.size,)):
+            return last[0], last[1].copy(), last[2].copy()
+        cap = opt.curvature_cap
+        a = float(_curvature(np.array([ref.f]), np.array([cur.f]), cur.df[None], dx, dx2,
+                             cap)[0])
+        b = _curvature(ref.g, cur.g, cur.dg, dx, dx2, cap)
+        c = _curvature(ref.h, cur.h, cur.dh, dx, dx2, cap)
+        if cur.source not in SURROGATE_SOURCES:
+            return a, b, c
+        if opt.surrogate_constraint_curvature == 'zero':
+            b = np.where(self._surrogate_rule_mask(b.size), 0.0, b)
+            c = np.zeros(cur.h.size)
+        if opt.surrogate_objective_curvature == 'zero':
+            a = 0.0
+        elif opt.surrogate_objective_curvature == 'nonnegative':
+            a = max(a, 0.0)
+        return a, b, c
+
+    def _surrogate_rule_mask(self, m: int) -> Array:
+        """Which of the m inequality constraints the surrogate constraint rule applies to."""
+        rows = self._surrogate_rows
+        if rows is None:
+            return np.ones(m, bool)
+        mask = np.asarray(rows(m) if callable(rows) else rows, dtype=bool)
+        if mask.shape != (m,):
+            raise ValueError(f'surrogate_rule_constraints has {mask.size} entries for {m} '
+                             'constraints')
+        return mask
+
     def _run(self) -> Generator[tuple[str, Array], Any, None]:
         opt = self.options
-        cap = opt.curvature_cap
         if self.history:
             points = self._points
             cur_idx = max(k for k, r in enumerate(self.history) if r.get('accepted', True))
@@ -845,43 +890,7 @@ class DynamicQ:
             if cur.df is None:
                 value = yield from self._request('gradient', cur.x)
                 self._parse_gradient(value, cur)
-            if ref is None:
-                a, b, c = 0.0, np.zeros(cur.g.size), np.zeros(cur.h.size)
-            else:
-                dx = ref.x - cur.x
-                dx2 = float(dx @ dx)
-                if dx2 > 0:
-                    a = float(
-                        _curvature(
-                            np.array([ref.f]), np.array([cur.f]), cur.df[None], dx, dx2, cap
-                        )[0]
-                    )
-                    b = _curvature(ref.g, cur.g, cur.dg, dx, dx2, cap)
-                    c = _curvature(ref.h, cur.h, cur.dh, dx, dx2, cap)
-                    if cur.source in SURROGATE_SOURCES:
-                        if opt.surrogate_constraint_curvature == 'zero':
-                            rows = self._surrogate_rows
-                            if rows is None:
-                                rows = np.ones(cur.g.size, bool)
-                            elif callable(rows):
-                                rows = rows(cur.g.size)
-                            rows = np.asarray(rows, dtype=bool)
-                            if rows.shape != b.shape:
-                                raise ValueError(
-                                    f'surrogate_rule_constraints has {rows.size} entries '
-                                    f'for {b.size} constraints')
-                            b = np.where(rows, 0.0, b)
-                            c = np.zeros(cur.h.size)
-                        if opt.surrogate_objective_curvature == 'zero':
-                            a = 0.0
-                        elif opt.surrogate_objective_curvature == 'nonnegative':
-                            a = max(a, 0.0)
-                    last = self._last_curvature
-                    if (math.sqrt(dx2) < opt.curvature_min_step and last is not None
-                            and last[1].shape == b.shape and last[2].shape == c.shape):
-                        a, b, c = last[0], last[1].copy(), last[2].copy()
-                else:
-                    a, b, c = 0.0, np.zeros(cur.g.size), np.zeros(cur.h.size)
+            a, b, c = self._curvatures(ref, cur)
             self._last_curvature = (a, np.asarray(b, float).copy(), np.asarray(c, float).copy())
             rho = self._rho
             x_new, sub = solve_subproblem(cur, rho, a, b, c, self.lower, self.upper, opt.lfopc)
