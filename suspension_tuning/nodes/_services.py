@@ -14,16 +14,37 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+import yaml
 from rclpy.callback_groups import CallbackGroup
 from rclpy.node import Node
-from rclpy.qos import qos_profile_services_default
+from rclpy.qos import (
+    DurabilityPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_services_default,
+)
 from rclpy.service_introspection import ServiceIntrospectionState
+from std_msgs.msg import String
 from suspension_tuning_interfaces.srv import EvaluateDesign
+
+from suspension_tuning.model_identity import ModelMismatchError, check_same
 
 #: Longest wait between looks at a server that may have vanished, s.  Shorter waits
 #: wake the waiting thread more often, and each wake-up takes the GIL from the thread
 #: running a model (with 0.1 s waits a 0.7 s batch ran 50-70 ms slower).
 POLL_S = 1.0
+#: A worker's model description: a late subscriber still gets it.
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def _description(text: str) -> dict[str, Any]:
+    """A worker's ~/model message as a dict (a text that is no mapping: no fingerprint)."""
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError:
+        data = None
+    return data if isinstance(data, dict) else {'unreadable_description': text}
 
 
 class ServiceCallError(RuntimeError):
@@ -146,6 +167,9 @@ class SimulationPool:
     contiguous chunks, one per live worker, sent concurrently; a chunk whose worker
     fails (timeout, vanished) is sent again to another live worker, and the failed
     worker is not used again.  When no worker is left, :class:`ServiceCallError` says so.
+    The pool keeps each worker's latched model description; :meth:`check_models` pins
+    the one fingerprint of the live workers (or refuses a mix), and every answer after
+    it must carry that fingerprint.
 
     Parameters
     ----------
@@ -174,6 +198,49 @@ class SimulationPool:
                         for name in workers}
         self.alive = list(workers)
         self.calls = 0
+        # Each worker's model description (its latched ~/model, with the fingerprint),
+        # and the fingerprint every answer must carry once check_models pinned it.
+        self.models: dict[str, dict[str, Any]] = {}
+        self.fingerprint = ''
+        for name in workers:
+            node.create_subscription(
+                String, f'{name.rstrip("/")}/model',
+                lambda msg, name=name: self.models.__setitem__(name, _description(msg.data)),
+                LATCHED, callback_group=group)
+
+    def check_models(self, wait_s: float = 5.0) -> str:
+        """The fingerprint of the live workers' model, pinned for the answers that follow.
+
+        Waits up to ``wait_s`` for each live worker's model description.  A worker not
+        heard from whose service is not there either is dropped (as a dead one would
+        be); every other worker must have described its model.
+
+        Raises
+        ------
+        ModelMismatchError
+            The workers run different models (the message names each and its
+            fingerprint).
+        ServiceCallError
+            No live worker, or one that answers but has not described its model.
+        """
+        self.fingerprint = ''
+        deadline = time.monotonic() + wait_s
+        while (any(w not in self.models for w in self.alive) and time.monotonic() < deadline
+               and not self.stopping()):
+            time.sleep(0.02)  # the subscriptions are served by the node's executor
+        for worker in [w for w in self.alive if w not in self.models]:
+            if self.clients[worker].service_is_ready():
+                raise ServiceCallError(f'worker {worker} serves evaluate but has published no '
+                                       f'model description (~/model) within {wait_s} s')
+            self.node.get_logger().warning(f'worker {worker} is not running (no model '
+                                           'description, no service): not used')
+            self.alive.remove(worker)
+        if not self.alive:
+            raise ServiceCallError('no simulation worker is running (' +
+                                   ', '.join(self.clients) + ')')
+        self.fingerprint = check_same({w: str(self.models[w].get('fingerprint', 'none'))
+                                       for w in self.alive})
+        return self.fingerprint
 
     def evaluate(self, scenario: str, n_vars: int, designs: np.ndarray,
                  return_inputs: bool = False, publish_telemetry: bool = False,
@@ -220,6 +287,11 @@ class SimulationPool:
                     continue
                 if not outcome.success:
                     raise ValueError(outcome.error)
+                if self.fingerprint and outcome.model_fingerprint != self.fingerprint:
+                    raise ModelMismatchError(
+                        f'worker {worker} answered from model {outcome.model_fingerprint}, '
+                        f'but this run uses model {self.fingerprint}: a worker restarted '
+                        'with another model, FMU, mapping or configuration')
                 responses[index] = outcome
                 del pending[index]
         return [responses[i] for i in sorted(responses)]

@@ -29,8 +29,11 @@ Parameter ``model``: 'builtin' (default) or 'fmu', a user's full vehicle model a
 FMI co-simulation FMU (``fmu_path``, ``fmu_mapping``: docs/fmu.md), checked at
 start-up: a worker whose FMU or mapping does not fit does not start.  ``~/model``
 (std_msgs/String, latched) says which model the worker runs (for an FMU: its file,
-GUID or instantiation token and the mapping); the coordinator records it in the run
-configuration.  An FMU worker publishes no telemetry.
+GUID or instantiation token and the mapping) with its fingerprint
+(:mod:`suspension_tuning.model_identity`), which every answer carries too and the
+start-up log names in one line; the coordinator records it in the run configuration
+and refuses to mix workers whose fingerprints differ.  An FMU worker publishes no
+telemetry.
 """
 
 from __future__ import annotations
@@ -51,6 +54,7 @@ from suspension_tuning_interfaces.srv import EvaluateDesign
 
 from suspension_tuning import evaluation, simplified_inputs, telemetry
 from suspension_tuning.fmu import FmuConfigError, MappingError, worker_model
+from suspension_tuning.model_identity import builtin_description, summary_line
 from suspension_tuning.nodes._services import serve
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.paths import dump_yaml
@@ -130,6 +134,9 @@ class FullVehicleSimNode(Node):
         self.declare_parameter('model', 'builtin')
         self.declare_parameter('fmu_path', '')
         self.declare_parameter('fmu_mapping', '')
+        # FMU start-up check with one run (auto: when the FMU declares no unit for a
+        # mapped variable; always; never), docs/fmu.md
+        self.declare_parameter('plausibility_check', 'auto')
         # full-model integrator when a request names none (config/vehicle.yaml default)
         self.declare_parameter('integrator', load_vehicle_params().integrator.method)
         try:  # before anything else: a bad FMU set-up leaves nothing half-started
@@ -138,9 +145,15 @@ class FullVehicleSimNode(Node):
         except (FmuConfigError, MappingError):
             Node.destroy_node(self)
             raise
+        self.model_description = (
+            builtin_description(str(self.get_parameter('integrator').value))
+            if self.fmu is None else self.fmu.description())
+        self.model_fingerprint = self.model_description['fingerprint']
+        self.get_logger().info(summary_line(self.model_description))
+        if self.fmu is not None:
+            self._check_fmu_plausibility()
         self.model_pub = self.create_publisher(String, '~/model', LATCHED)
-        self.model_pub.publish(String(data=dump_yaml(
-            {'model': 'builtin'} if self.fmu is None else self.fmu.description())))
+        self.model_pub.publish(String(data=dump_yaml(self.model_description)))
         self.clock_pub = self.create_publisher(Clock, '/clock', 10)
         self.state_pub = self.create_publisher(VehicleState, '/vehicle/state', RELIABLE)
         self.valve_answers: dict[int, tuple[int, int, int, int]] = {}
@@ -154,9 +167,37 @@ class FullVehicleSimNode(Node):
         self.runs = 0
         self.evaluate_calls = 0
 
+    def _check_fmu_plausibility(self) -> None:
+        """Log the FMU's start-up notes; run the plausibility check where it is due.
+
+        ``plausibility_check``: 'auto' runs it when a mapped variable's unit is not
+        declared by the FMU, 'always' or 'never'.  Its numbers and warnings go into the
+        log and into the model description (``plausibility``).
+        """
+        log = self.get_logger()
+        for note in self.fmu.notes:
+            log.info(note)
+        mode = str(self.get_parameter('plausibility_check').value)
+        if mode not in ('auto', 'always', 'never'):
+            log.warning(f'plausibility_check {mode!r} is not auto, always or never: taken as '
+                        'auto')
+            mode = 'auto'
+        if self.fmu.undeclared_units:
+            log.info('units the FMU does not declare: ' + '; '.join(self.fmu.undeclared_units))
+        if mode == 'never' or (mode == 'auto' and not self.fmu.undeclared_units):
+            return
+        numbers, warnings = self.fmu.plausibility()
+        log.info('plausibility check (centre design): ' + ', '.join(
+            f'{scenario} ' + ', '.join(f'{k} {v:.3g}' for k, v in found.items())
+            for scenario, found in numbers.items()))
+        for warning in warnings:
+            log.warning(f'plausibility: {warning}')
+        self.model_description['plausibility'] = {'numbers': numbers, 'warnings': warnings}
+
     def _on_evaluate(self, request: EvaluateDesign.Request,
                      response: EvaluateDesign.Response) -> EvaluateDesign.Response:
         start = time.monotonic()
+        response.model_fingerprint = self.model_fingerprint
         self.evaluate_calls += 1
         try:
             designs = evaluation.parse_designs(request.scenario, int(request.n_vars),
@@ -179,6 +220,7 @@ class FullVehicleSimNode(Node):
             return response
         self.runs += len(designs)
         response.success = True
+        response.model_fingerprint = self.model_fingerprint
         response.n_designs = len(designs)
         response.f = result.f.tolist()
         response.n_constraints = result.g.shape[1]

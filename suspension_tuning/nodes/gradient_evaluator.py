@@ -7,8 +7,11 @@ over the live workers as the coordinator splits its own, and a worker that fails
 its designs sent to another), a chunk of ``calibration_chunk`` designs at a time;
 after each chunk ``~/calibration_progress`` (CalibrationProgress) says how many of
 the samples are done, which the coordinator passes on in its action feedback.  The
-scaling is cached in ``calibration_dir`` under a key of scenario, n_vars, samples, seed
-and a hash of the model configuration, so it costs its N full runs once.
+scaling is cached in ``calibration_dir`` under a key of scenario, n_vars, samples, seed,
+a hash of the simplified models' configuration and the fingerprint of the workers'
+full model (:mod:`suspension_tuning.model_identity`), so it costs its N full runs once
+per model and is never used for another.  Workers whose fingerprints differ, or
+differ from the caller's (``model_fingerprint`` of the request), are refused.
 
 Service ``~/gradient`` (EvaluateGradient): the gradient of f and the Jacobian of g by
 central differences of the scaled simplified model, all 2n perturbations in one batch
@@ -30,6 +33,7 @@ from suspension_tuning_interfaces.msg import CalibrationProgress
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning import simplified_inputs
+from suspension_tuning.model_identity import ModelMismatchError
 from suspension_tuning.nodes._services import ServiceCallError, SimulationPool, serve
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.scaling import Scaling, scaling_key
@@ -85,7 +89,8 @@ class GradientEvaluatorNode(Node):
         return self.calibration_dir / (f"v{key['calibration_version']}_"
                                        f"{key['scenario']}_{key['n_vars']}var_"
                                        f"{key['n_samples']}s_{key['seed']}_"
-                                       f"{key['config_hash']}{tail}.json")
+                                       f"{key['config_hash']}_"
+                                       f"model_{key['model_fingerprint']}{tail}.json")
 
     def _on_calibrate(self, request: Calibrate.Request,
                       response: Calibrate.Response) -> Calibrate.Response:
@@ -94,7 +99,14 @@ class GradientEvaluatorNode(Node):
             scenario, n_vars = self._check(request.scenario, request.n_vars)
             n_samples, seed = calibration_settings(
                 int(request.n_samples or self.get_parameter('default_samples').value))
-            key = scaling_key(scenario, n_vars, n_samples, seed)
+            fingerprint = self.pool.check_models()
+            if request.model_fingerprint and request.model_fingerprint != fingerprint:
+                raise ModelMismatchError(
+                    f'the caller runs model {request.model_fingerprint}, but the gradient '
+                    f'evaluator\'s workers ({", ".join(self.pool.alive)}) run model '
+                    f'{fingerprint}: give both nodes the same sim_workers')
+            response.model_fingerprint = fingerprint
+            key = scaling_key(scenario, n_vars, n_samples, seed, fingerprint)
             if request.integrator:  # samples of a named integrator get their own cache
                 key['integrator'] = request.integrator
             path = self._cache_path(key)
@@ -126,7 +138,8 @@ class GradientEvaluatorNode(Node):
         response.success = True
         response.wall_time_s = time.monotonic() - start
         self.get_logger().info(
-            f'{scenario}/{n_vars} calibrated ({"cache" if response.from_cache else "full runs"}): '
+            f'{scenario}/{n_vars} calibrated for model {response.model_fingerprint} '
+            f'({"cache" if response.from_cache else "full runs"}): '
             + ', '.join(f'{f.name} R2={f.r2:.3f}' if f.rule == 'eq25' else f'{f.name} {f.rule}'
                         for f in scaling.functions))
         return response

@@ -155,6 +155,7 @@ def calibrate(
     n_samples: int | None = None,
     seed: int | None = None,
     run_full=None,
+    model_fingerprint: str | None = None,
 ) -> Scaling:
     """Fit the eq. 25 scaling from N full-model samples over the design space.
 
@@ -169,6 +170,9 @@ def calibrate(
     run_full : callable, optional
         ``run_full(scenario, x (N, n)) -> ScenarioResult`` (default
         ``scenarios.run_scenario``); all N designs go in one batch.
+    model_fingerprint : str, optional
+        Fingerprint of the model ``run_full`` runs, for the key (default the built-in
+        model's, :func:`suspension_tuning.model_identity.builtin_fingerprint`).
 
     Returns
     -------
@@ -181,7 +185,7 @@ def calibrate(
     res = run_full(scenario, x)
     inputs = [SimplifiedInputs.from_scenario_result(res, i) for i in range(n_samples)]
     return fit_calibration(scenario, n_vars, x, res.f, res.g, inputs,
-                           scaling_key(scenario, n_vars, n_samples, seed))
+                           scaling_key(scenario, n_vars, n_samples, seed, model_fingerprint))
 
 
 def load_or_calibrate(
