@@ -43,7 +43,41 @@ ROAD_KEYS = ('road', 'wheelbase_m', 'start_rear_axle_at_m', 'contact_length_m', 
 
 
 class MappingError(ValueError):
-    """A mapping file that cannot be used (the message names the key)."""
+    """A mapping file that cannot be used (the message names the key; one line each)."""
+
+
+class _Problems:
+    """Collects every problem of a mapping, so that one message lists them all."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def take(self, fn: Any, *args: Any, default: Any = None, **kwargs: Any) -> Any:
+        """``fn(*args, **kwargs)``; on a MappingError its lines are kept, ``default`` returned."""
+        try:
+            return fn(*args, **kwargs)
+        except MappingError as error:
+            self.lines.extend(str(error).splitlines())
+            return default
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """A YAML loader that refuses a key given twice in one mapping (YAML keeps the last)."""
+
+
+def _unique_mapping(loader: _UniqueKeyLoader, node: yaml.MappingNode, deep: bool = False):
+    seen: dict[Any, int] = {}
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        if key in seen:
+            raise MappingError(f'line {key_node.start_mark.line + 1}: key {key!r} given twice '
+                               f'(first on line {seen[key] + 1}); YAML would keep only the last')
+        seen[key] = key_node.start_mark.line
+    return loader.construct_mapping(node, deep=deep)
+
+
+_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
+                                 _unique_mapping)
 
 
 @dataclass(frozen=True)
@@ -84,6 +118,14 @@ class RoadInputs:
     contact_length_m: float
     inputs: dict[str, VariableRef]
 
+    def variables(self) -> dict[str, tuple[VariableRef, tuple[str, ...]]]:
+        """Each FMU input with the corners it takes: several corners get their mean."""
+        out: dict[str, tuple[VariableRef, tuple[str, ...]]] = {}
+        for corner, ref in self.inputs.items():
+            first, corners = out.get(ref.name, (ref, ()))
+            out[ref.name] = (first, (*corners, corner))
+        return out
+
 
 @dataclass(frozen=True)
 class ScenarioMapping:
@@ -115,6 +157,9 @@ class FmuMapping:
     scenarios: dict[str, ScenarioMapping]
     path: Path | None = None
     text: str = field(default='', repr=False)
+    #: The vehicle's total mass, kg (optional): the start-up plausibility check
+    #: compares the static tyre loads with it.
+    vehicle_mass_kg: float | None = None
 
 
 def _keys(d: Any, where: str, allowed: tuple[str, ...], required: tuple[str, ...] = ()) -> dict:
@@ -131,6 +176,7 @@ def _keys(d: Any, where: str, allowed: tuple[str, ...], required: tuple[str, ...
 
 def _number(d: dict, key: str, where: str, default: float | None = None,
             positive: bool = False, minimum: float | None = None) -> float:
+    """``d[key]`` as a finite float (``default`` when absent; None: required)."""
     if key not in d:
         if default is None:
             raise MappingError(f'{where}.{key}: missing')
@@ -162,34 +208,77 @@ def _ref(value: Any, quantity: str, where: str) -> VariableRef:
     return VariableRef(name, quantity, unit, where)
 
 
-def _corners(value: Any, quantity: str, where: str) -> dict[str, VariableRef]:
-    """Per-wheel entry: ``{fl: name, fr: name, rl: name, rr: name, unit: ...}``."""
-    d = _keys(value, where, (*CORNERS, 'unit'), CORNERS)
+def _corners(value: Any, quantity: str, where: str,
+             per_axle: bool = False) -> dict[str, VariableRef]:
+    """Per-wheel entry: ``{fl: name, fr: name, rl: name, rr: name, unit: ...}``.
+
+    With ``per_axle`` (road inputs) ``{front: name, rear: name}`` stands for both
+    wheels of each axle.  Every problem of the entry is listed together.
+    """
+    axles = ('front', 'rear') if per_axle else ()
+    d = _keys(value, where, (*CORNERS, *axles, 'unit'))
+    given = dict(d)
+    for axle, pair in zip(axles, (('fl', 'fr'), ('rl', 'rr'))):
+        if axle in given:
+            both = [c for c in pair if c in given]
+            if both:
+                raise MappingError(f'{where}: {axle} and {"/".join(both)} both given; '
+                                   f'{axle} stands for {" and ".join(pair)}')
+            given.update({c: given[axle] for c in pair})
+    missing = [c for c in CORNERS if c not in given]
+    if missing:
+        raise MappingError(f'{where}: missing key(s) {missing}' + (
+            ' (or front/rear, one input per axle)' if per_axle else ''))
     unit = d.get('unit')
-    return {c: _ref(d[c] if unit is None or not isinstance(d[c], str)
-                    else {'name': d[c], 'unit': unit}, quantity, f'{where}.{c}')
+    problems = _Problems()
+    refs = {c: problems.take(_ref, given[c] if unit is None or not isinstance(given[c], str)
+                             else {'name': given[c], 'unit': unit}, quantity, f'{where}.{c}')
             for c in CORNERS}
+    if problems.lines:
+        raise MappingError('\n'.join(problems.lines))
+    return refs
 
 
 def _design(value: Any, where: str) -> dict[str, VariableRef]:
     d = _keys(value, where, DESIGN_KEYS, DESIGN_KEYS)
-    return {k: _ref(d[k], DESIGN_QUANTITIES[k], f'{where}.{k}') for k in DESIGN_KEYS}
+    problems = _Problems()
+    refs = {k: problems.take(_ref, d[k], DESIGN_QUANTITIES[k], f'{where}.{k}')
+            for k in DESIGN_KEYS}
+    if problems.lines:
+        raise MappingError('\n'.join(problems.lines))
+    return refs
 
 
 def _outputs(value: Any, name: str, where: str) -> dict[str, VariableRef]:
+    """The scenario's output channels; every problem listed, duplicates refused."""
+    problems = _Problems()
     d = _keys(value, where, tuple(OUTPUTS))
     out: dict[str, VariableRef] = {}
     for key, entry in d.items():
         quantity, per_wheel, _ = OUTPUTS[key]
         if per_wheel:
-            for c, ref in _corners(entry, quantity, f'{where}.{key}').items():
+            for c, ref in problems.take(_corners, entry, quantity, f'{where}.{key}',
+                                        default={}).items():
                 out[f'{key}_{c}'] = ref
         else:
-            out[key] = _ref(entry, quantity, f'{where}.{key}')
+            ref = problems.take(_ref, entry, quantity, f'{where}.{key}')
+            if ref is not None:
+                out[key] = ref
     missing = [k for k, (_, _, needed) in OUTPUTS.items() if name in needed
                and k not in d]
     if missing:
-        raise MappingError(f'{where}: the {name} scenario needs output(s) {missing}')
+        problems.lines.append(f'{where}: the {name} scenario needs output(s) {missing}')
+    by_name: dict[str, list[str]] = {}
+    for ref in out.values():
+        by_name.setdefault(ref.name, []).append(ref.where)
+    for variable, places in by_name.items():
+        if len(places) > 1:
+            problems.lines.append(
+                f'{where}: FMU variable {variable!r} is mapped to {len(places)} outputs '
+                f'({", ".join(places)}); each output needs its own variable (a model with '
+                'one seat or one force per axle must still output one per seat and wheel)')
+    if problems.lines:
+        raise MappingError('\n'.join(problems.lines))
     return out
 
 
@@ -213,12 +302,15 @@ def _road(value: Any, where: str) -> RoadInputs:
     inputs = dict(d['inputs']) if isinstance(d['inputs'], dict) else d['inputs']
     if isinstance(inputs, dict) and 'unit' in d:
         inputs['unit'] = d['unit']
-    return RoadInputs(road=road,
-                      wheelbase_m=_number(d, 'wheelbase_m', where, positive=True),
-                      start_rear_axle_at_m=_number(d, 'start_rear_axle_at_m', where, 0.5,
-                                                   minimum=0.0),
-                      contact_length_m=_number(d, 'contact_length_m', where, 0.0, minimum=0.0),
-                      inputs=_corners(inputs, 'length', f'{where}.inputs'))
+    problems = _Problems()
+    numbers = (problems.take(_number, d, 'wheelbase_m', where, positive=True),
+               problems.take(_number, d, 'start_rear_axle_at_m', where, 0.5, minimum=0.0),
+               problems.take(_number, d, 'contact_length_m', where, 0.0, minimum=0.0))
+    refs = problems.take(_corners, inputs, 'length', f'{where}.inputs', per_axle=True)
+    if problems.lines:
+        raise MappingError('\n'.join(problems.lines))
+    return RoadInputs(road=road, wheelbase_m=numbers[0], start_rear_axle_at_m=numbers[1],
+                      contact_length_m=numbers[2], inputs=refs)
 
 
 def _window(value: Any, where: str) -> tuple[float, float]:
@@ -229,67 +321,99 @@ def _window(value: Any, where: str) -> tuple[float, float]:
     return float(value[0]), float(value[1])
 
 
-def _scenario(name: str, d: Any, design: Any, where: str) -> ScenarioMapping:
+def _scenario(name: str, d: Any, design: Any, where: str) -> ScenarioMapping | None:
+    """One scenario's mapping; its problems go to ``problems`` (None when there are any)."""
+    problems = _Problems()
     d = _keys(d, where, (*SCENARIO_KEYS['common'], *SCENARIO_KEYS[name]),
               ('stop_time_s', 'step_size_s', 'speed_kmh', 'outputs'))
-    start = _number(d, 'start_time_s', where, 0.0)
-    stop = _number(d, 'stop_time_s', where)
-    step = _number(d, 'step_size_s', where, positive=True)
-    if stop <= start:
-        raise MappingError(f'{where}.stop_time_s: must be after start_time_s ({start} s)')
-    n = (stop - start) / step
-    if abs(n - round(n)) > 1e-6 * max(1.0, n) or round(n) < 3:
-        raise MappingError(f'{where}.step_size_s: {step} s must divide stop - start '
-                           f'({stop - start} s) into at least 3 steps')
+    start = problems.take(_number, d, 'start_time_s', where, 0.0)
+    stop = problems.take(_number, d, 'stop_time_s', where)
+    step = problems.take(_number, d, 'step_size_s', where, positive=True)
+    speed = problems.take(_number, d, 'speed_kmh', where, positive=True)
+    if None not in (start, stop, step):
+        if stop <= start:
+            problems.lines.append(f'{where}.stop_time_s: must be after start_time_s '
+                                  f'({start} s)')
+        else:
+            n = (stop - start) / step
+            if abs(n - round(n)) > 1e-6 * max(1.0, n) or round(n) < 3:
+                problems.lines.append(f'{where}.step_size_s: {step} s must divide stop - start '
+                                      f'({stop - start} s) into at least 3 steps')
     if 'design' in d:
         design = d['design']
         design_where = f'{where}.design'
     else:
         design_where = 'design'
+    design_refs = None
     if design is None:
-        raise MappingError(f'{where}: no design section (top-level or in the scenario)')
+        problems.lines.append(f'{where}: no design section (top-level or in the scenario)')
+    else:
+        design_refs = problems.take(_design, design, design_where)
     windows = None
     if name == 'handling' and d.get('windows') is not None:
-        w = _keys(d['windows'], f'{where}.windows', ('first_lane_change_s', 'manoeuvre_s'),
-                  ('first_lane_change_s', 'manoeuvre_s'))
-        windows = {k: _window(v, f'{where}.windows.{k}') for k, v in w.items()}
-    outputs = _outputs(d['outputs'], name, f'{where}.outputs')
-    if name == 'handling' and windows is None and 'x' not in outputs:
-        raise MappingError(f'{where}: the handling metrics need their time windows: give '
-                           'windows (first_lane_change_s, manoeuvre_s) or an x output '
-                           '(position along the track, config/scenarios.yaml)')
-    settle = _number(d, 'settle_s', where, 0.0, minimum=0.0) if name == 'ride' else 0.0
-    if settle >= stop - start - 2 * step:
-        raise MappingError(f'{where}.settle_s: {settle} s leaves nothing of the run')
+        w = problems.take(_keys, d['windows'], f'{where}.windows',
+                          ('first_lane_change_s', 'manoeuvre_s'),
+                          ('first_lane_change_s', 'manoeuvre_s'))
+        if w is not None:
+            windows = {k: problems.take(_window, v, f'{where}.windows.{k}')
+                       for k, v in w.items()}
+    outputs = problems.take(_outputs, d['outputs'], name, f'{where}.outputs', default={})
+    if name == 'handling' and windows is None and 'x' not in outputs and 'outputs' in d:
+        problems.lines.append(
+            f'{where}: the handling metrics need their time windows: give windows '
+            '(first_lane_change_s, manoeuvre_s) or an x output (position along the track, '
+            'config/scenarios.yaml)')
+    settle = 0.0
+    if name == 'ride':
+        settle = problems.take(_number, d, 'settle_s', where, 0.0, minimum=0.0, default=0.0)
+        if None not in (start, stop, step) and settle >= stop - start - 2 * step:
+            problems.lines.append(f'{where}.settle_s: {settle} s leaves nothing of the run')
     speed_param = d.get('speed_parameter')
-    design_refs = _design(design, design_where)
-    parameters = _parameters(d.get('parameters'), f'{where}.parameters')
-    twice = sorted(set(parameters) & {ref.name for ref in design_refs.values()})
+    speed_ref = None if speed_param is None else problems.take(
+        _ref, speed_param, 'velocity', f'{where}.speed_parameter')
+    parameters = problems.take(_parameters, d.get('parameters'), f'{where}.parameters',
+                               default={})
+    twice = sorted(set(parameters) & {ref.name for ref in (design_refs or {}).values()})
     if twice:
-        raise MappingError(f'{where}.parameters: {twice} also receive design variables')
+        problems.lines.append(f'{where}.parameters: {twice} also receive design variables')
+    road = (problems.take(_road, d['road'], f'{where}.road')
+            if d.get('road') is not None else None)
+    if problems.lines:
+        raise MappingError('\n'.join(problems.lines))
     return ScenarioMapping(
-        name=name, start_time_s=start, stop_time_s=stop, step_size_s=step,
-        speed_kmh=_number(d, 'speed_kmh', where, positive=True),
-        speed_parameter=None if speed_param is None else _ref(
-            speed_param, 'velocity', f'{where}.speed_parameter'),
-        parameters=parameters, design=design_refs, outputs=outputs, settle_s=settle,
-        road=_road(d['road'], f'{where}.road') if d.get('road') is not None else None,
-        windows=windows)
+        name=name, start_time_s=start, stop_time_s=stop, step_size_s=step, speed_kmh=speed,
+        speed_parameter=speed_ref, parameters=parameters, design=design_refs,
+        outputs=outputs, settle_s=settle, road=road, windows=windows)
 
 
 def parse_mapping(text: str, path: Path | None = None) -> FmuMapping:
-    """Check a mapping given as YAML text (see docs/fmu.md)."""
+    """Check a mapping given as YAML text (see docs/fmu.md).
+
+    Raises
+    ------
+    MappingError
+        Every problem found, one line each, naming the key.
+    """
     source = str(path) if path is not None else 'mapping'
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader
+    except MappingError as error:
+        raise MappingError(f'{source}: {error}') from None
     except yaml.YAMLError as error:
         raise MappingError(f'{source}: not valid YAML: {error}') from None
-    d = _keys(data, source, ('design', 'scenarios'), ('scenarios',))
+    d = _keys(data, source, ('design', 'scenarios', 'vehicle_mass_kg'), ('scenarios',))
+    problems = _Problems()
+    mass = (problems.take(_number, d, 'vehicle_mass_kg', 'mapping', positive=True)
+            if 'vehicle_mass_kg' in d else None)
     scen = _keys(d['scenarios'], 'scenarios', ('ride', 'handling'))
     if not scen:
         raise MappingError('scenarios: name at least one of ride, handling')
-    return FmuMapping({name: _scenario(name, body, d.get('design'), f'scenarios.{name}')
-                       for name, body in scen.items()}, path, text)
+    scenarios = {name: problems.take(_scenario, name, body, d.get('design'),
+                                     f'scenarios.{name}') for name, body in scen.items()}
+    if problems.lines:
+        raise MappingError(f'{source}: {len(problems.lines)} problem(s):\n  '
+                           + '\n  '.join(problems.lines))
+    return FmuMapping(scenarios, path, text, mass)
 
 
 def load_mapping(path: str | Path) -> FmuMapping:

@@ -22,6 +22,7 @@ naming the design.
 from __future__ import annotations
 
 import hashlib
+import json
 import shutil
 import tempfile
 import time
@@ -31,10 +32,12 @@ from typing import Any
 from xml.etree import ElementTree
 
 import numpy as np
+import yaml
 
 from suspension_tuning.evaluation import DesignEvaluation, metric_table
 from suspension_tuning.fmu.mapping import CORNERS, FmuMapping, ScenarioMapping, load_mapping
 from suspension_tuning.fmu.units import Conversion, resolve
+from suspension_tuning.model_identity import with_fingerprint
 from suspension_tuning.vehicle import design as design_mod
 from suspension_tuning.vehicle import road as road_mod
 from suspension_tuning.vehicle import scenarios as scen
@@ -49,6 +52,16 @@ INPUT_CAUSALITIES = ('input',)
 OUTPUT_CAUSALITIES = ('output',)
 #: fmi2Fatal / fmi3Fatal: the instance may not be called again.
 FMI_FATAL = 4
+#: Standard gravity, m/s^2 (static tyre load as a mass).
+GRAVITY_MPS2 = 9.80665
+#: Seat W_b RMS a road vehicle plausibly shows on a test road, m/s^2.  ISO 2631-1
+#: Annex C calls < 0.315 m/s^2 "not uncomfortable" and > 2 "extremely uncomfortable";
+#: the paper's Defender spans 0.7-4.4 at its corners on the Belgian paving.  The range is
+#: wide on purpose: it catches factors of 10-1000 (a wrong unit), not a harsh vehicle.
+PLAUSIBLE_SEAT_RMS_MPS2 = (0.05, 10.0)
+#: Static tyre load against the mapped vehicle mass: a 15 % departure is no rounding
+#: of the mass, nor the sprung/unsprung split; a wrong force unit is a factor 1000.
+STATIC_LOAD_TOLERANCE = 0.15
 #: FMU libraries of closed models, kept loaded (FmuModel.close).
 _LOADED_LIBRARIES: list = []
 
@@ -126,6 +139,11 @@ class FmuModel:
         self.variables = {v.name: v for v in md.modelVariables}
         units = {u.name: u for u in (md.unitDefinitions or [])}
         problems: list[str] = []
+        #: Start-up notes for the worker's log (inputs shared by several wheels...).
+        self.notes: list[str] = []
+        #: Mapped variables whose unit the FMU does not declare (the mapping's or SI is
+        #: assumed): what the start-up plausibility check is for.
+        self.undeclared_units: list[str] = []
         self.conversions: dict[str, dict[str, Conversion]] = {}
         for name, sm in self.mapping.scenarios.items():
             conv: dict[str, Conversion] = {}
@@ -137,8 +155,13 @@ class FmuModel:
             for key, ref in sm.outputs.items():
                 conv[f'outputs.{key}'] = self._check(ref, OUTPUT_CAUSALITIES, units, problems)
             if sm.road is not None:
-                for c, ref in sm.road.inputs.items():
-                    conv[f'road.{c}'] = self._check(ref, INPUT_CAUSALITIES, units, problems)
+                for _name, (ref, corners) in sm.road.variables().items():
+                    checked = self._check(ref, INPUT_CAUSALITIES, units, problems)
+                    conv.update({f'road.{c}': checked for c in corners})
+                    if len(corners) > 1:
+                        self.notes.append(
+                            f'scenarios.{name}.road: FMU input {ref.name!r} gets the mean of '
+                            f'the {"/".join(c.upper() for c in corners)} tracks')
             for pname in sm.parameters:
                 self._check_fixed(sm, pname, problems)
             self.conversions[name] = conv
@@ -177,6 +200,9 @@ class FmuModel:
         if v.type not in REAL_TYPES:
             bad.append(f'type {v.type}, expected a real ({", ".join(REAL_TYPES)})')
         declared = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
+        if not declared and ref.quantity != 'dimensionless':
+            self.undeclared_units.append(f'{ref.where} ({ref.name}, taken as '
+                                         f'{ref.unit or "SI"})')
         try:
             conversion = resolve(ref.quantity, declared, ref.unit, units)
         except ValueError as error:
@@ -216,10 +242,14 @@ class FmuModel:
 
     # ------------------------------------------------------------------ description
     def description(self) -> dict[str, Any]:
-        """What a run's configuration records about this model (file, identity, mapping)."""
+        """What a run's configuration records about this model (file, identity, mapping).
+
+        With its fingerprint (:mod:`suspension_tuning.model_identity`): the FMU file's
+        hash, the mapping's content and the worker's configuration files.
+        """
         md = self.model_description
         token = 'guid' if md.fmiVersion == '2.0' else 'instantiation_token'
-        return {
+        return with_fingerprint({
             'model': 'fmu',
             'fmu_file': self.path.name,
             'fmu_path': str(self.path.resolve()),
@@ -230,11 +260,70 @@ class FmuModel:
             'generation_tool': md.generationTool,
             'fmu_mapping': str(self.mapping.path.resolve()) if self.mapping.path else '',
             'mapping': self.mapping.text,
-        }
+            # The mapping's content (its comments and layout aside): part of the identity.
+            'mapping_content': json.dumps(yaml.safe_load(self.mapping.text or '{}'),
+                                          sort_keys=True, default=str),
+            'integrator': None,  # the FMU's own solver: part of its file
+        })
 
     def scenarios(self) -> tuple[str, ...]:
         """The scenarios the mapping serves."""
         return tuple(self.mapping.scenarios)
+
+    def plausibility(self) -> tuple[dict[str, dict[str, float]], list[str]]:
+        """One run of the centre design per scenario, and warnings where it looks wrong.
+
+        The check for mapped variables whose unit the FMU does not declare: a unit off
+        by a factor (a volume in cm^3 taken as litres) shows as tyre loads that do not
+        carry the vehicle or a seat vibration no road vehicle has.
+
+        - Static load: the time mean of the four tyre forces, as a mass (N / g), against
+          the mapping's ``vehicle_mass_kg`` (warned beyond ``STATIC_LOAD_TOLERANCE``).
+        - Ride: each seat's BS 6841 W_b RMS against ``PLAUSIBLE_SEAT_RMS_MPS2``.
+
+        Returns
+        -------
+        numbers : dict
+            Per scenario: ``static_load_kg``, and in ride ``a_rms_driver_mps2``,
+            ``a_rms_passenger_mps2``.
+        warnings : list of str
+            One line each, with the numbers.
+        """
+        numbers: dict[str, dict[str, float]] = {}
+        warnings: list[str] = []
+        mass = self.mapping.vehicle_mass_kg
+        for name in self.mapping.scenarios:
+            x = np.full((1, 2), 0.5)  # the centre of the design space (tune's default start)
+            try:
+                result = self.evaluate(name, x)
+            except (FmuRunError, ValueError) as error:
+                warnings.append(f'{name}: the run of the centre design failed ({error}); '
+                                'check the units of the design parameters')
+                continue
+            fz = np.asarray(result.result.histories['tyre_fz_n'])[0]
+            found = {'static_load_kg': float(np.mean(fz.sum(axis=0)) / GRAVITY_MPS2)}
+            if mass is not None and abs(found['static_load_kg'] / mass - 1.0) > \
+                    STATIC_LOAD_TOLERANCE:
+                warnings.append(
+                    f'{name}: the tyres carry {found["static_load_kg"]:.0f} kg on average, '
+                    f'the mapping says vehicle_mass_kg {mass:g}: check the unit of tyre_fz')
+            if name == 'ride':
+                low, high = PLAUSIBLE_SEAT_RMS_MPS2
+                for seat in ('driver', 'passenger'):
+                    key = f'a_rms_{seat}_mps2'
+                    value = float(result.metrics[0, result.metric_names.index(key)])
+                    found[key] = value
+                    if not low <= value <= high:
+                        warnings.append(
+                            f'ride: {seat} seat W_b RMS {value:.3g} m/s^2 at the centre '
+                            f'design, outside {low:g}-{high:g} m/s^2 for a road vehicle: '
+                            'check the units of the design parameters (gas volume) and of '
+                            'acc_driver / acc_passenger')
+            numbers[name] = found
+        if mass is None:
+            warnings.append('no vehicle_mass_kg in the mapping: the static tyre loads are not '
+                            'checked against the vehicle')
+        return numbers, warnings
 
     # ------------------------------------------------------------------ running
     def _slave(self, instance_name: str):
@@ -290,15 +379,23 @@ class FmuModel:
         return out
 
     def _road_inputs(self, sm: ScenarioMapping, t_rel: np.ndarray) -> np.ndarray:
-        """Road elevation (FMU units) under FL, FR, RL, RR at times t_rel, (n, 4)."""
+        """Road elevation (FMU units) of each road input at times t_rel, (n, inputs).
+
+        One column per FMU input variable (``RoadInputs.variables`` order): the track
+        under its corner, or the mean of the tracks of the corners that share it (a
+        per-axle input gets the mean of the left and right tracks).
+        """
         ri, road = sm.road, self.roads[sm.name]
         x_rear = ri.start_rear_axle_at_m + sm.speed_kmh / 3.6 * t_rel
         x_front = x_rear + ri.wheelbase_m
         conv = self.conversions[sm.name]
-        cols = []
+        track = {}
         for c, x_axle in zip(CORNERS, (x_front, x_front, x_rear, x_rear)):
-            z, _ = road.elevation(x_axle, 0 if c[1] == 'l' else 1)
-            cols.append(conv[f'road.{c}'].to_fmu(z))
+            track[c] = road.elevation(x_axle, 0 if c[1] == 'l' else 1)[0]
+        cols = []
+        for _name, (_ref, corners) in ri.variables().items():
+            z = np.mean([track[c] for c in corners], axis=0)
+            cols.append(conv[f'road.{corners[0]}'].to_fmu(z))
         return np.column_stack(cols)
 
     def _run_one(self, sm: ScenarioMapping, index: int, x: np.ndarray, values: dict,
@@ -307,7 +404,7 @@ class FmuModel:
         fmi3 = self.model_description.fmiVersion == '3.0'
         names = [ref.name for ref in sm.outputs.values()]
         out_vr = [self.variables[n].valueReference for n in names]
-        in_vr = ([self.variables[ref.name].valueReference for ref in sm.road.inputs.values()]
+        in_vr = ([self.variables[name].valueReference for name in sm.road.variables()]
                  if inputs is not None else [])
         t0, h, n = sm.start_time_s, sm.step_size_s, sm.n_steps
         samples = np.empty((len(names), n + 1))
