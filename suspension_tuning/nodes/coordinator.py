@@ -28,7 +28,6 @@ import time
 from typing import Any
 
 import numpy as np
-import yaml
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
@@ -43,6 +42,7 @@ from suspension_tuning.nodes._services import ServiceCallError, SimulationPool, 
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.correction import load_correction_options
 from suspension_tuning.optim.dynamic_q import load_options
+from suspension_tuning.optim.scaling import fit_note, load_min_fit_r2, poor_fits
 from suspension_tuning.paths import config_dir, dump_yaml, read_yaml
 from suspension_tuning.reported_design import design_success, reported_design, result_message
 from suspension_tuning.tuning import (
@@ -161,15 +161,6 @@ class CoordinatorNode(Node):
         clients = ReentrantCallbackGroup()
         self.pool = SimulationPool(self, list(self.get_parameter('sim_workers').value),
                                    self.timeout_s, clients, self._stopped)
-        # The full model each worker runs (its latched ~/model: built-in, or the FMU's
-        # file, identity and mapping), recorded in every run configuration.
-        self.worker_models: dict[str, Any] = {}
-        for worker in self.get_parameter('sim_workers').value:
-            name = str(worker).rstrip('/')
-            self.create_subscription(
-                String, f'{name}/model',
-                lambda msg, name=name: self.worker_models.__setitem__(
-                    name, yaml.safe_load(msg.data)), LATCHED, callback_group=clients)
         gradient_node = str(self.get_parameter('gradient_node').value).rstrip('/')
         self.gradient_client = self.create_client(EvaluateGradient, f'{gradient_node}/gradient',
                                                   callback_group=clients)
@@ -184,6 +175,7 @@ class CoordinatorNode(Node):
             CONFIG_DIR / 'optimiser.yaml')
         self.options = load_options(config, str(self.get_parameter('optimiser_section').value))
         self.correction = load_correction_options(config)
+        self.min_fit_r2 = load_min_fit_r2(config)
         self.progress_pub = self.create_publisher(IterationRecord, '/optimisation/progress',
                                                   RELIABLE)
         self.config_pub = self.create_publisher(String, '/optimisation/run_config', LATCHED)
@@ -243,18 +235,17 @@ class CoordinatorNode(Node):
             'integrator': request.integrator or 'simulation default',
             'coordinator_parameters': {name: p.value for name, p in
                                        self.get_parameters_by_prefix('').items()},
+            'calibration_fit': {'min_r2': self.min_fit_r2},
+            'model_fingerprint': self.pool.fingerprint,
             'simulation_models': self._worker_models(),
         }
         stamp = f'started_unix_s: {time.time()!r}\n'
         self.config_pub.publish(String(data=dump_yaml(config) + stamp + self.static_config_yaml))
 
-    def _worker_models(self, wait_s: float = 2.0) -> dict[str, Any]:
-        """Each worker's model description; a worker not heard from within wait_s says so."""
-        names = [str(w).rstrip('/') for w in self.get_parameter('sim_workers').value]
-        deadline = time.monotonic() + wait_s
-        while any(n not in self.worker_models for n in names) and time.monotonic() < deadline:
-            time.sleep(0.02)  # the subscriptions are served by the node's executor
-        return {n: self.worker_models.get(n, 'no model description received') for n in names}
+    def _worker_models(self) -> dict[str, Any]:
+        """Each worker's model description (after :meth:`SimulationPool.check_models`)."""
+        return {str(w).rstrip('/'): self.pool.models.get(w, 'no model description received')
+                for w in self.get_parameter('sim_workers').value}
 
     def _full_model(self, request: TuningRequest, scenario: str | None = None):
         """The full model of ``scenario`` (default the objective's) on the workers."""
@@ -314,12 +305,27 @@ class CoordinatorNode(Node):
             response = call(self, self.calibrate_client, Calibrate.Request(
                 scenario=scenario, n_vars=request.n_vars,
                 n_samples=int(self.get_parameter('calibration_samples').value), force=False,
-                integrator=request.integrator),
+                integrator=request.integrator, model_fingerprint=self.pool.fingerprint),
                 self.timeout_s * 2, self._stopped)
         finally:
             self._calibrating = None
         if not response.success:
             raise ValueError(f'calibration failed: {response.error}')
+        note = fit_note(scenario, request.n_vars, response.function_names,
+                        response.r_squared, response.full_max, self.min_fit_r2)
+        goal_handle.publish_feedback(Optimise.Feedback(phase='calibration_fit', note=note))
+        self.get_logger().info(note)
+        poor = poor_fits(response.function_names, response.r_squared, response.full_max,
+                         self.min_fit_r2)
+        if poor:
+            fits = ', '.join(f'{name} {r2:.2f}' for name, r2 in poor)
+            raise ValueError(
+                f'the simplified {scenario} model does not fit this full model (model '
+                f'{self.pool.fingerprint}): eq. 25 R^2 {fits}, below the threshold '
+                f'{self.min_fit_r2:g} (config/optimiser.yaml calibration_fit.min_r2); its '
+                'gradients would mislead Dynamic-Q.  Use full-model gradients (tune '
+                '--gradient full; goal gradient_source full), or lower min_r2 to run on the '
+                'corrected simplified gradients anyway')
         return response
 
     def _on_calibration_progress(self, msg: CalibrationProgress) -> None:
@@ -357,9 +363,22 @@ class CoordinatorNode(Node):
         if goal_handle.is_cancel_requested:  # cancelled while it waited for an earlier goal
             goal_handle.canceled()
             return Optimise.Result(success=False, message='cancelled before it started')
-        self.get_logger().info(f'optimising {request.scenario} with {request.n_vars} '
-                               f'variables, {request.gradient_source} gradients')
+        refusal = None
+        try:
+            fingerprint = self.pool.check_models()
+        except (ValueError, ServiceCallError) as error:
+            refusal = error
+        # The run configuration records every worker's model, also for a refused goal.
         self._publish_run_config(request)
+        if refusal is not None:
+            self.get_logger().error(f'optimisation refused: {refusal}')
+            goal_handle.abort()
+            message = Optimise.Result(success=False, message=f'refused: {refusal}')
+            self.result_pub.publish(message)
+            return message
+        self.get_logger().info(f'optimising {request.scenario} with {request.n_vars} '
+                               f'variables, {request.gradient_source} gradients, model '
+                               f'{fingerprint}')
         counter = RunCounter()
         history_msgs: list[IterationRecord] = []
 
@@ -387,10 +406,12 @@ class CoordinatorNode(Node):
             self.get_logger().error(f'optimisation failed: {error}')
             goal_handle.abort()
             message = Optimise.Result(success=False, message=str(error), history=history_msgs,
-                                      wall_time_s=time.monotonic() - t0, **counter.as_dict())
+                                      wall_time_s=time.monotonic() - t0,
+                                      model_fingerprint=fingerprint, **counter.as_dict())
             self.result_pub.publish(message)
             return message
         message = action_result(result, history_msgs, t0, counter)
+        message.model_fingerprint = fingerprint
         design = reported_design(result)
         if (design is not None and self.get_parameter('final_telemetry').value
                 and not goal_handle.is_cancel_requested):

@@ -35,6 +35,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -43,6 +45,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.stats import qmc
 
+from suspension_tuning.model_identity import builtin_fingerprint
 from suspension_tuning.vehicle.design import X_LOWER, X_UPPER, validate_design
 from suspension_tuning.vehicle.params import CONFIG_DIR
 
@@ -366,8 +369,18 @@ def fit_scaling(
 CALIBRATION_VERSION = 2
 
 
-def scaling_key(scenario: str, n_vars: int, n_samples: int, seed: int) -> dict[str, Any]:
-    """Cache key of a calibration: version, scenario, n_vars, n_samples, seed, config hash."""
+def scaling_key(scenario: str, n_vars: int, n_samples: int, seed: int,
+                model_fingerprint: str | None = None) -> dict[str, Any]:
+    """Cache key of a calibration.
+
+    Version, scenario, n_vars, n_samples, seed, the hash of the simplified models'
+    configuration and the fingerprint of the full model that gave the samples
+    (:mod:`suspension_tuning.model_identity`; default: the built-in model with the
+    integrator of config/vehicle.yaml).  A cached calibration is used only under an
+    equal key, so never for another full model.
+    """
+    if model_fingerprint is None:
+        model_fingerprint = builtin_fingerprint()
     return {
         'calibration_version': CALIBRATION_VERSION,
         'scenario': scenario,
@@ -375,4 +388,68 @@ def scaling_key(scenario: str, n_vars: int, n_samples: int, seed: int) -> dict[s
         'n_samples': int(n_samples),
         'seed': int(seed),
         'config_hash': config_hash(),
+        'model_fingerprint': str(model_fingerprint),
     }
+
+
+#: Default of config/optimiser.yaml ``calibration_fit.min_r2``.
+MIN_FIT_R2 = 0.5
+
+
+def load_min_fit_r2(path: str | Path) -> float:
+    """``calibration_fit.min_r2`` of an optimiser file (default :data:`MIN_FIT_R2`)."""
+    import yaml
+
+    data = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
+    section = (data or {}).get('calibration_fit') or {}
+    if not isinstance(section, dict) or set(section) - {'min_r2'}:
+        raise ValueError(f'{path}: calibration_fit takes one key, min_r2')
+    value = section.get('min_r2', MIN_FIT_R2)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value <= 1.0:
+        raise ValueError(f'{path}: calibration_fit.min_r2 must be a number <= 1, got {value!r}')
+    return float(value)
+
+
+def poor_fits(names: Sequence[str], r_squared: Sequence[float], full_max: Sequence[float],
+              min_r2: float) -> list[tuple[str, float]]:
+    """The functions whose eq. 25 fit is too poor for their gradients to be used.
+
+    The objective always counts.  A constraint counts when it is *active* over the
+    samples: at least one full-model sample lies on or beyond its bound (full maximum
+    >= 0); a constraint every sample satisfies does not steer the optimiser there,
+    and its fit is not judged.  A fit that could not be measured (non-finite R^2,
+    e.g. a simplified value that does not change over the samples) counts as poor.
+
+    Parameters
+    ----------
+    names, r_squared, full_max : sequences
+        Per function (objective first): name, R^2 of the scaled simplified values
+        against the full ones over the samples, largest full-model value.
+    min_r2 : float
+        Threshold (config/optimiser.yaml ``calibration_fit.min_r2``).
+
+    Returns
+    -------
+    list of (name, r2)
+        The poor fits, in order; empty when the calibration may be used.
+    """
+    poor = []
+    for i, (name, r2, top) in enumerate(zip(names, r_squared, full_max)):
+        if i > 0 and top < 0.0:
+            continue
+        if not (math.isfinite(r2) and r2 >= min_r2):
+            poor.append((str(name), float(r2)))
+    return poor
+
+
+def fit_note(scenario: str, n_vars: int, names: Sequence[str], r_squared: Sequence[float],
+             full_max: Sequence[float], min_r2: float) -> str:
+    """One line on a calibration's fit: R^2 per function, which are judged, the verdict."""
+    parts = []
+    for i, (name, r2, top) in enumerate(zip(names, r_squared, full_max)):
+        judged = i == 0 or top >= 0.0
+        parts.append(f'{name} {r2:.3f}' + ('' if judged else ' (inactive)'))
+    poor = poor_fits(names, r_squared, full_max, min_r2)
+    verdict = ('poor: ' + ', '.join(n for n, _ in poor)) if poor else 'ok'
+    return (f'{scenario}/{n_vars} eq. 25 fit R^2: ' + ', '.join(parts)
+            + f'; threshold {min_r2:g}: {verdict}')
