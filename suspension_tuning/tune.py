@@ -63,9 +63,12 @@ def format_feedback(feedback: Optimise.Feedback) -> str:
     """Format one progress line of the action's feedback.
 
     Phase 'calibration': the eq. 25 full-model samples done of total (the first run of
-    a configuration spends them before its first iteration); phase 'iteration': the
-    Dynamic-Q iteration just finished.
+    a configuration spends them before its first iteration); phase 'calibration_fit':
+    the R^2 of the eq. 25 fit per function against its threshold; phase 'iteration':
+    the Dynamic-Q iteration just finished.
     """
+    if feedback.phase == 'calibration_fit':
+        return f'calibration fit: {feedback.note}'
     if feedback.phase == 'calibration':
         c = feedback.calibration
         return (f'calibration (eq. 25): {c.samples_done:3d}/{c.samples_total} full-model '
@@ -107,6 +110,8 @@ def format_result(result) -> str:
               f'simplified-model runs: {result.n_simplified_runs}',
               f'calibration full-model runs: {result.n_calibration_runs}',
               f'wall time: {result.wall_time_s:.1f} s']
+    if result.model_fingerprint:
+        lines.append(f'full model: fingerprint {result.model_fingerprint}')
     if design:
         lines.append('optimum in physical units:' if result.feasible else
                      'least violating design in physical units (not feasible):')
