@@ -230,6 +230,9 @@ def _corners(value: Any, quantity: str, where: str,
         raise MappingError(f'{where}: missing key(s) {missing}' + (
             ' (or front/rear, one input per axle)' if per_axle else ''))
     unit = d.get('unit')
+    if unit is not None and (str(unit) not in UNITS or UNITS[str(unit)][0] != quantity):
+        raise MappingError(f'{where}.unit: {unit!r} is not a unit of {quantity} this tool '
+                           f'knows ({known_units(quantity)})')
     problems = _Problems()
     refs = {c: problems.take(_ref, given[c] if unit is None or not isinstance(given[c], str)
                              else {'name': given[c], 'unit': unit}, quantity, f'{where}.{c}')

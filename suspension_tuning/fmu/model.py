@@ -62,6 +62,10 @@ PLAUSIBLE_SEAT_RMS_MPS2 = (0.05, 10.0)
 #: Static tyre load against the mapped vehicle mass: a 15 % departure is no rounding
 #: of the mass, nor the sprung/unsprung split; a wrong force unit is a factor 1000.
 STATIC_LOAD_TOLERANCE = 0.15
+#: A design range this many times away from the FMU's own start value of the parameter
+#: is taken as a wrong unit (the paper's ranges span a factor 6 (volume) and 30 (dpsf):
+#: a realistic start value lies inside or near them; a unit slip is 1000).
+START_VALUE_FACTOR = 10.0
 #: FMU libraries of closed models, kept loaded (FmuModel.close).
 _LOADED_LIBRARIES: list = []
 
@@ -270,6 +274,42 @@ class FmuModel:
         """The scenarios the mapping serves."""
         return tuple(self.mapping.scenarios)
 
+    def _start_value_warnings(self) -> list[str]:
+        """Design parameters whose range, in the units assumed, is far from the FMU's start.
+
+        An FMU's start value of a parameter is a value of its own vehicle in its own
+        units.  When the design's range, converted to the unit the mapping states (the
+        FMU declares none), lies more than ``START_VALUE_FACTOR`` away from it, the unit
+        is most likely wrong (0.1-0.6 sent as litres to a parameter that starts at 300
+        cm^3).
+        """
+        ranges = {'dpsf_front': design_mod.DPSF_RANGE, 'dpsf_rear': design_mod.DPSF_RANGE,
+                  'gas_volume_front': design_mod.GVOL_RANGE_M3,
+                  'gas_volume_rear': design_mod.GVOL_RANGE_M3}
+        out, seen = [], set()
+        for name, sm in self.mapping.scenarios.items():
+            for key, ref in sm.design.items():
+                v = self.variables.get(ref.name)
+                declared = v.unit or (v.declaredType.unit if v.declaredType is not None
+                                      else None)
+                if declared or ref.name in seen or v.start in (None, ''):
+                    continue
+                seen.add(ref.name)
+                try:
+                    start = abs(float(v.start))
+                except ValueError:
+                    continue
+                conv = self.conversions[name][f'design.{key}']
+                low, high = sorted(abs(float(conv.to_fmu(b))) for b in ranges[key])
+                if start > 0 and (start > START_VALUE_FACTOR * high
+                                  or start < low / START_VALUE_FACTOR):
+                    factor = max(start / high, low / start)
+                    out.append(f'{ref.where}: the design sends {low:.3g}-{high:.3g} '
+                               f'({ref.unit or "SI"}) to {ref.name!r}, whose start value in '
+                               f'the FMU is {start:.4g}: a factor {factor:.0f} apart; is the '
+                               'unit right?')
+        return out
+
     def plausibility(self) -> tuple[dict[str, dict[str, float]], list[str]]:
         """One run of the centre design per scenario, and warnings where it looks wrong.
 
@@ -290,7 +330,7 @@ class FmuModel:
             One line each, with the numbers.
         """
         numbers: dict[str, dict[str, float]] = {}
-        warnings: list[str] = []
+        warnings: list[str] = self._start_value_warnings()
         mass = self.mapping.vehicle_mass_kg
         for name in self.mapping.scenarios:
             x = np.full((1, 2), 0.5)  # the centre of the design space (tune's default start)

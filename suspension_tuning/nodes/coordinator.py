@@ -311,6 +311,11 @@ class CoordinatorNode(Node):
             self._calibrating = None
         if not response.success:
             raise ValueError(f'calibration failed: {response.error}')
+        return response
+
+    def _check_fit(self, goal_handle, request: TuningRequest, scenario: str,
+                   response: Calibrate.Response) -> None:
+        """Feedback and log the calibration's fit; refuse one below the threshold."""
         note = fit_note(scenario, request.n_vars, response.function_names,
                         response.r_squared, response.full_max, self.min_fit_r2)
         goal_handle.publish_feedback(Optimise.Feedback(phase='calibration_fit', note=note))
@@ -326,7 +331,6 @@ class CoordinatorNode(Node):
                 'gradients would mislead Dynamic-Q.  Use full-model gradients (tune '
                 '--gradient full; goal gradient_source full), or lower min_r2 to run on the '
                 'corrected simplified gradients anyway')
-        return response
 
     def _on_calibration_progress(self, msg: CalibrationProgress) -> None:
         calibrating = self._calibrating
@@ -393,8 +397,9 @@ class CoordinatorNode(Node):
             gradients = {}
             if request.gradient_source == 'simplified':
                 for scenario in self._simplified_scenarios(request):
-                    counter.calibration_runs += int(
-                        self._calibrate(goal_handle, request, scenario).n_full_runs)
+                    calibration = self._calibrate(goal_handle, request, scenario)
+                    counter.calibration_runs += int(calibration.n_full_runs)
+                    self._check_fit(goal_handle, request, scenario, calibration)
                     gradients[scenario] = self._simplified_gradient(request, scenario)
             models = {name: self._full_model(request, name)
                       for name in request.constraint_scenarios}
