@@ -80,15 +80,20 @@ def road_files(config_dir: str | Path | None = None) -> dict[str, str]:
     return out
 
 
-def config_sha256(config_dir: str | Path | None = None) -> str:
-    """SHA-256 (hex) of the worker's configuration files, names included."""
+def files_sha256(names: tuple[str, ...], config_dir: str | Path | None = None) -> str:
+    """SHA-256 (hex) of configuration files in order, names included (missing: a mark)."""
     d = Path(config_dir) if config_dir is not None else CONFIG_DIR
     h = hashlib.sha256()
-    for name in WORKER_CONFIG_FILES:
+    for name in names:
         path = d / name
         h.update(name.encode())
         h.update(path.read_bytes() if path.exists() else b'<missing>')
     return h.hexdigest()
+
+
+def config_sha256(config_dir: str | Path | None = None) -> str:
+    """SHA-256 (hex) of the worker's configuration files, names included."""
+    return files_sha256(WORKER_CONFIG_FILES, config_dir)
 
 
 def fingerprint(description: dict[str, Any]) -> str:

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 import yaml
 from rclpy.parameter import Parameter
+from test_fmu_worker import fmu_parameters, write_mapping
 
 from suspension_tuning.fmu import FmuModel, MappingError
 from suspension_tuning.fmu.mapping import parse_mapping
@@ -54,14 +55,7 @@ def half_car_mapping(volume_unit='cm3', damper_law=0, body_mass_kg=MASS_KG, **ri
 
 
 def write(tmp_path, mapping, name='half_car.yaml'):
-    path = tmp_path / name
-    path.write_text(yaml.safe_dump(mapping))
-    return str(path)
-
-
-def fmu_parameters(fmu, mapping_path):
-    return [Parameter('model', value='fmu'), Parameter('fmu_path', value=fmu),
-            Parameter('fmu_mapping', value=mapping_path)]
+    return write_mapping(tmp_path, mapping, name)
 
 
 class Graph:

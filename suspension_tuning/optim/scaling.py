@@ -33,7 +33,6 @@ mapped to ``[X_LOWER, X_UPPER]``.  Deterministic for a given seed.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 from collections.abc import Sequence
@@ -45,9 +44,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.stats import qmc
 
-from suspension_tuning.model_identity import builtin_fingerprint
+from suspension_tuning.model_identity import builtin_fingerprint, files_sha256
 from suspension_tuning.vehicle.design import X_LOWER, X_UPPER, validate_design
-from suspension_tuning.vehicle.params import CONFIG_DIR
 
 Array = NDArray[np.float64]
 FUNCTION_NAMES = ('f', 'g_fl', 'g_fr', 'g_rl', 'g_rr')
@@ -64,13 +62,7 @@ KEY_CONFIG_FILES = (
 
 def config_hash(config_dir: str | Path | None = None) -> str:
     """SHA-256 (first 16 hex digits) of the config files that define both models."""
-    d = Path(config_dir) if config_dir is not None else CONFIG_DIR
-    h = hashlib.sha256()
-    for name in KEY_CONFIG_FILES:
-        path = d / name
-        h.update(name.encode())
-        h.update(path.read_bytes() if path.exists() else b'<missing>')
-    return h.hexdigest()[:16]
+    return files_sha256(KEY_CONFIG_FILES, config_dir)[:16]
 
 
 def sample_design_space(
