@@ -357,10 +357,12 @@ def read_csv_tracks(path: str | Path) -> RoadTracks:
                            f'(distance, left, right), {example}')
     try:
         float(names[0])
+        numeric = True
+    except ValueError:
+        numeric = False
+    if numeric:
         raise _error(path, f'line {line_no}: the first line is a number, expected a header '
                            f'naming the columns and their unit, {example}')
-    except ValueError:
-        pass
     for k, name in enumerate(names):
         unit = _header_unit(name)
         if unit is None:
@@ -428,8 +430,10 @@ def _resample(u: np.ndarray, z: np.ndarray, dx_m: float) -> tuple[np.ndarray, np
     """z on x = 0, dx, ..., floor(L/dx) dx (box filter first when dx is coarser)."""
     du = float(np.median(np.diff(u)))
     width = int(round(dx_m / du))
-    if width > 1:
-        z = ndimage.uniform_filter1d(z, width, mode='nearest')
+    if width > 1:  # a centred box of width dx (half weights at its two ends)
+        kernel = np.ones(width + 1)
+        kernel[[0, -1]] = 0.5
+        z = ndimage.convolve1d(z, kernel / width, mode='nearest')
     n = int(math.floor(u[-1] / dx_m + 1e-6))  # u of a file carries rounding errors
     x = np.arange(n + 1) * dx_m
     return x, np.interp(x, u, z)
@@ -571,6 +575,29 @@ def file_sha256(path: str | Path) -> str:
         for block in iter(lambda: f.read(1 << 20), b''):
             h.update(block)
     return h.hexdigest()
+
+
+def road_identity(road: str) -> dict[str, str]:
+    """What identifies a road a goal names: its text and, for a road file, file and SHA-256.
+
+    Empty for ``''`` (the configured road, which the model fingerprint covers).  What
+    the run configuration records and the calibration's cache key holds.
+
+    Raises
+    ------
+    ValueError
+        An unknown road name or a bad entry.
+    """
+    if not road:
+        return {}
+    from .road import resolve_road
+
+    spec = resolve_road(road)
+    out = {'road': str(road)}
+    if isinstance(spec, FileRoadSpec):
+        out['file'] = spec.file
+        out['sha256'] = file_sha256(spec.file) if spec.path.is_file() else 'missing'
+    return out
 
 
 # ---------------------------------------------------------------------- writing
