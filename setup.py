@@ -29,7 +29,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
-        (f'share/{PACKAGE}/config', glob('config/*.yaml')),
+        # configuration files and the Foxglove layout (config/foxglove_layout.json)
+        (f'share/{PACKAGE}/config', glob('config/*.yaml') + glob('config/*.json')),
         # road files that config/road.yaml names (with their licence notices)
         (f'share/{PACKAGE}/config/roads', glob('config/roads/*')),
     ],

@@ -12,7 +12,9 @@ resolve_road`); a bad or too short road file is such a bad request.
 On request it publishes the time histories of the first design as telemetry on
 standard types, stamped with simulated time (:mod:`suspension_tuning.telemetry` has
 the table): ``~/telemetry/imu`` (sensor_msgs/Imu: the body's attitude, rates and
-longitudinal, lateral and vertical acceleration), ``~/telemetry/seat/{driver,passenger}``
+longitudinal, lateral and vertical acceleration), ``~/telemetry/attitude``
+(geometry_msgs/Vector3Stamped: roll, pitch and yaw angles, rad),
+``~/telemetry/seat/{driver,passenger}``
 and ``~/telemetry/seat/{driver,passenger}_wb`` (geometry_msgs/AccelStamped: each
 seat's vertical acceleration, unweighted and BS 6841 W_b weighted),
 ``~/telemetry/struts`` (JointState: stroke m, force N per strut),
