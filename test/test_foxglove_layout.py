@@ -48,7 +48,7 @@ def resolve(message_type, fields: str, sequence_lengths: dict[str, int]) -> str:
         assert match, f'bad field {part!r}'
         name, index = match['name'], match['index']
         types = message.get_fields_and_field_types()
-        assert name in types, f'{message_type.__name__} has no field {name!r} ({sorted(types)})'
+        assert name in types, f'{type(message).__name__} has no field {name!r} ({sorted(types)})'
         kind = types[name]
         if index is not None:
             array = re.match(r'^(sequence<(?P<seq>[^,>]+)(, \d+)?>|(?P<arr>[a-z0-9_]+)\[\d+\])$',
