@@ -59,6 +59,11 @@ def test_ride_optimisation_through_the_graph_on_crg_and_csv_road_files(
                 scenario='ride', n_vars=2, gradient_source=gradient, max_iterations=1,
                 road=sett_files[kind])), 30.0)
             results[kind] = wait(handle.get_result_async(), 300.0).result
+        # one recorded run of the centre (tune --evaluate) on the CSV road
+        handle = wait(client.send_goal_async(Optimise.Goal(
+            scenario='ride', n_vars=2, gradient_source='evaluate', road=sett_files['csv'])),
+            30.0)
+        evaluated = wait(handle.get_result_async(), 120.0).result
         bad = wait(client.send_goal_async(Optimise.Goal(
             scenario='ride', n_vars=2, gradient_source='full', max_iterations=1,
             road=str(tmp_path / 'no_such_road.crg'))), 30.0)
@@ -73,9 +78,12 @@ def test_ride_optimisation_through_the_graph_on_crg_and_csv_road_files(
     assert results['csv'].history[0].f == pytest.approx(results['crg'].history[0].f, rel=1e-6)
     assert results['crg'].n_calibration_runs == SAMPLES
     assert not refused.success and 'no_such_road.crg: no such file' in refused.message
+    # the evaluation: one full run at the centre, the optimisation's first iterate
+    assert evaluated.success and evaluated.n_full_runs == 1 and len(evaluated.history) == 1
+    assert evaluated.f == results['csv'].history[0].f
     bags = sorted(Path(tmp_path / 'bags').iterdir())
-    assert len(bags) == 2, bags  # the refused goal never started a run
-    for bag, kind in zip(bags, ('crg', 'csv')):
+    assert len(bags) == 3, bags  # the refused goal never started a run
+    for bag, kind in zip(bags, ('crg', 'csv', 'csv')):
         road = summary(bag)['run_config']['ride_road']
         assert road['source'] == 'goal' and road['file'] == sett_files[kind]
         assert road['sha256'] == file_sha256(sett_files[kind])

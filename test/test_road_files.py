@@ -257,3 +257,31 @@ def test_crg_measured_block_and_identified_sett_paving_agree_in_the_stone_band()
     # sett's median 1.5 (flat stone tops with random heights are near white below 5
     # cycles/m)
     assert tracks['waviness_band'].min() > np.median(sett['waviness_band'])
+
+
+def test_crg_measured_block_drives_a_short_ride_evaluation_with_explicit_repetition():
+    from suspension_tuning.vehicle.params import load_scenarios_config
+    from suspension_tuning.vehicle.scenarios import run_scenario
+
+    config = load_scenarios_config()
+    # 4 s at 50 km/h from 0.5 m, plus the vehicle: 61 m of road, six copies of the block
+    config['ride'].update(road='belgian_block_measured', duration_s=4.0, settle_s=1.0)
+    with pytest.warns(rf.RoadRepetitionWarning, match='1.39 Hz at 50 km/h'):
+        result = run_scenario('ride', [0.5005, 0.5005], config=config)
+    assert np.all(np.isfinite(result.f)) and result.f[0] > 0
+    config['ride']['road'] = f'{{file: "{BLOCK}"}}'  # the same file, repetition not asked
+    with pytest.raises(rf.RoadFileError, match=r'10.00 m long, shorter than the ride run'):
+        run_scenario('ride', [0.5005, 0.5005], config=config)
+
+
+def test_tune_sends_a_road_file_as_an_absolute_path_and_repetition_as_an_entry(tmp_path,
+                                                                               monkeypatch):
+    from suspension_tuning.tune import goal_road
+
+    monkeypatch.chdir(tmp_path)
+    assert goal_road('belgian_paving') == 'belgian_paving'  # a name stays a name
+    assert goal_road('track.crg') == str(tmp_path / 'track.crg')
+    entry = road_mod.resolve_road(goal_road('track.csv', repeat=True))
+    assert entry == rf.FileRoadSpec(str(tmp_path / 'track.csv'), repeat=True)
+    with pytest.raises(ValueError, match='--repeat-road applies to a road file'):
+        goal_road('belgian_paving', repeat=True)
