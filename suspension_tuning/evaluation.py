@@ -8,6 +8,7 @@ what is wrong (wrong length, NaN, out of bounds, unknown scenario).
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -148,7 +149,7 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
         result = run_mixed(designs, controllers, road=road or None, **kwargs)
     else:
         if road:
-            config = kwargs.get('config') or load_scenarios_config()
+            config = copy.deepcopy(kwargs.get('config') or load_scenarios_config())
             config['ride']['road'] = road
             kwargs['config'] = config
         result = run_scenario(scenario, designs, **kwargs)

@@ -8,9 +8,10 @@ Usage::
     road belgian_paving --write out/sett.crg  # write a road's wheel tracks to a file
     road belgian_paving --compare belgian_block_measured   # 10 m windows side by side
 
-For any named road or road file it prints the length and the RMS elevation of each wheel
-track (mean and linear trend removed), and the ISO 8608 fit of each track: G_d(n0) at
-n0 = 0.1 cycles/m, the waviness w and the class A-H, over a stated band (default
+For any named road or road file (without the fade-in a scenario starts on) it prints the
+length and the RMS elevation of each wheel track (mean and linear trend removed), and
+the ISO 8608 fit of each track: G_d(n0) at n0 = 0.1 cycles/m, the waviness w and the
+class A-H, over a stated band (default
 0.1-10 cycles/m, narrowed to what the road's length resolves; G_d(n0) extrapolated when
 the band starts above n0).  ``--plot`` draws the Welch PSD of both tracks with the fitted
 lines against the ISO 8608 class boundaries.  ``--write`` writes the wheel tracks as an
@@ -75,7 +76,7 @@ def describe(road: str, band: tuple[float, float], segment_m: float,
         'spec', 'profile', 'length_m', 'dx_m', 'band' (the band fitted), 'segment_m',
         and per track ('left', 'right'): 'rms_m', 'fit' (Iso8608Fit), 'psd' (n, G_d).
     """
-    spec = road_mod.resolve_road(road)
+    spec = _without_fade(road_mod.resolve_road(road))  # the road, not the run's start
     if track_m is not None and isinstance(spec, FileRoadSpec):
         from dataclasses import replace
 
