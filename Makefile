@@ -39,7 +39,7 @@ $(STAMPS)/interfaces: $(STAMPS)/requirements $(INTERFACE_FILES) scripts/build_in
 	@touch $@
 
 $(STAMPS)/package: $(STAMPS)/interfaces setup.py setup.cfg package.xml resource/suspension_tuning \
-		$(wildcard config/*.yaml) scripts/install_ament_files.py
+		$(wildcard config/*.yaml) $(wildcard config/*.json) $(wildcard config/roads/*) scripts/install_ament_files.py
 	$(PY) -m pip install -q --no-deps --no-build-isolation -e . $(PIP_QUIET)
 	$(PY) scripts/install_ament_files.py $(VENV)
 	@touch $@

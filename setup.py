@@ -19,6 +19,7 @@ CONSOLE_SCRIPTS = [
     'graph = suspension_tuning.graph:main',
     'tune = suspension_tuning.tune:main',
     'study = suspension_tuning.study:main',
+    'road = suspension_tuning.road_tool:main',
 ]
 
 setup(
@@ -28,7 +29,10 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
-        (f'share/{PACKAGE}/config', glob('config/*.yaml')),
+        # configuration files and the Foxglove layout (config/foxglove_layout.json)
+        (f'share/{PACKAGE}/config', glob('config/*.yaml') + glob('config/*.json')),
+        # road files that config/road.yaml names (with their licence notices)
+        (f'share/{PACKAGE}/config/roads', glob('config/roads/*')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

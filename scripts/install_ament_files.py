@@ -8,7 +8,9 @@ console scripts to ``<venv>/lib/suspension_tuning/``, as colcon does, but instal
 completes that layout in the venv:
 
 - ``share/ament_index/resource_index/packages/suspension_tuning`` (marker)
-- ``share/suspension_tuning/package.xml`` and ``share/suspension_tuning/config/*.yaml``
+- ``share/suspension_tuning/package.xml``, ``share/suspension_tuning/config/*.yaml``,
+  ``config/foxglove_layout.json`` and ``config/roads/`` (the road files config/road.yaml
+  names)
 - ``bin/<executable>``: links to ``lib/suspension_tuning/<executable>``, so every node
   is also a command on the venv's PATH.
 
@@ -33,10 +35,15 @@ def main(venv: str) -> None:
     share = prefix / 'share' / PACKAGE
     (share / 'config').mkdir(parents=True, exist_ok=True)
     shutil.copy(root / 'package.xml', share / 'package.xml')
-    for stale in (share / 'config').glob('*.yaml'):
-        stale.unlink()
-    for yaml_file in (root / 'config').glob('*.yaml'):
-        shutil.copy(yaml_file, share / 'config' / yaml_file.name)
+    for pattern in ('*.yaml', '*.json'):  # configuration files and the Foxglove layout
+        for stale in (share / 'config').glob(pattern):
+            stale.unlink()
+        for config_file in (root / 'config').glob(pattern):
+            shutil.copy(config_file, share / 'config' / config_file.name)
+    roads = share / 'config' / 'roads'  # road files of config/road.yaml, with their notices
+    if roads.is_dir():
+        shutil.rmtree(roads)
+    shutil.copytree(root / 'config' / 'roads', roads)
     lib = prefix / 'lib' / PACKAGE
     scripts = [ep.name for ep in distribution(PACKAGE).entry_points
                if ep.group == 'console_scripts']

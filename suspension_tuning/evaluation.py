@@ -8,6 +8,7 @@ what is wrong (wrong length, NaN, out of bounds, unknown scenario).
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -17,7 +18,11 @@ from numpy.typing import NDArray
 
 from suspension_tuning.vehicle.design import VARIABLE_NAMES, validate_design
 from suspension_tuning.vehicle.mixed import run_mixed
-from suspension_tuning.vehicle.params import load_vehicle_params, with_integrator
+from suspension_tuning.vehicle.params import (
+    load_scenarios_config,
+    load_vehicle_params,
+    with_integrator,
+)
 from suspension_tuning.vehicle.scenarios import SCENARIOS as MODEL_SCENARIOS
 from suspension_tuning.vehicle.scenarios import ScenarioResult, run_scenario
 
@@ -115,7 +120,7 @@ def metric_table(metrics: dict[str, np.ndarray], batch: int) -> tuple[list[str],
 
 
 def evaluate(scenario: str, designs: Array, controllers: list | None = None,
-             integrator: str | None = None, **kwargs: Any) -> DesignEvaluation:
+             integrator: str | None = None, road: str = '', **kwargs: Any) -> DesignEvaluation:
     """Run the full model on a batch of designs (m, n_vars).
 
     Parameters
@@ -129,6 +134,11 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
         see :func:`suspension_tuning.vehicle.mixed.run_mixed`).
     integrator : str, optional
         'fixed_step' or 'variable_step' (default config/vehicle.yaml, fixed_step).
+    road : str
+        The road of the ride and mixed scenarios in place of config/scenarios.yaml's: a
+        road name, a road file or an entry as YAML
+        (:func:`~suspension_tuning.vehicle.road.resolve_road`); '' = the configured one.
+        The handling scenario runs on its smooth road whatever this says.
     **kwargs
         Passed to :func:`suspension_tuning.vehicle.scenarios.run_scenario`.
     """
@@ -136,8 +146,12 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
         params = kwargs.get('params') or load_vehicle_params()
         kwargs['params'] = with_integrator(params, integrator)
     if scenario == 'mixed':
-        result = run_mixed(designs, controllers, **kwargs)
+        result = run_mixed(designs, controllers, road=road or None, **kwargs)
     else:
+        if road:
+            config = copy.deepcopy(kwargs.get('config') or load_scenarios_config())
+            config['ride']['road'] = road
+            kwargs['config'] = config
         result = run_scenario(scenario, designs, **kwargs)
     names, table = metric_table(result.metrics, len(designs))
     return DesignEvaluation(f=np.asarray(result.f, float), g=np.asarray(result.g, float),

@@ -5,33 +5,37 @@
 topic, stamped with simulated time.  Topic names are relative to the simulation
 node (``~/telemetry/<name>``):
 
-=====================  ==========================  ======================================
-name                   type                        content
-=====================  ==========================  ======================================
-``imu``                sensor_msgs/Imu             body at its centre of mass, frame
-                                                   ``base_link`` (x forward, y left, z up):
-                                                   orientation (roll, pitch, yaw),
-                                                   angular velocity (roll, pitch, yaw
-                                                   rate, rad/s), linear acceleration
-                                                   (longitudinal, lateral, vertical, m/s^2,
-                                                   gravity removed)
-``seat/driver``        geometry_msgs/AccelStamped  driver's seat vertical acceleration,
-                                                   unweighted, m/s^2 (frame
-                                                   ``driver_seat``, ``accel.linear.z``)
-``seat/passenger``     geometry_msgs/AccelStamped  the same at the rear passenger's seat
-                                                   (frame ``passenger_seat``)
-``seat/driver_wb``     geometry_msgs/AccelStamped  driver's seat, BS 6841 W_b weighted
-                                                   (the signal of eq. 9), m/s^2
-``seat/passenger_wb``  geometry_msgs/AccelStamped  passenger's seat, W_b weighted
-``struts``             sensor_msgs/JointState      per strut (``strut_front_left``, ...):
-                                                   position = stroke m (compression
-                                                   positive), effort = force N
-``tyres``              sensor_msgs/JointState      per tyre (``tyre_front_left``, ...):
-                                                   position = slip angle rad, effort =
-                                                   normal force N
-``steering``           sensor_msgs/JointState      ``front_road_wheel``: position = angle
-                                                   rad, velocity = rate rad/s
-=====================  ==========================  ======================================
+=====================  ==============================  ======================================
+name                   type                            content
+=====================  ==============================  ======================================
+``imu``                sensor_msgs/Imu                 body at its centre of mass, frame
+                                                       ``base_link`` (x forward, y left, z up):
+                                                       orientation (roll, pitch, yaw),
+                                                       angular velocity (roll, pitch, yaw
+                                                       rate, rad/s), linear acceleration
+                                                       (longitudinal, lateral, vertical, m/s^2,
+                                                       gravity removed)
+``attitude``           geometry_msgs/Vector3Stamped    the body's roll (x), pitch (y) and
+                                                       yaw (z) angles, rad, frame
+                                                       ``base_link``: the Imu's orientation
+                                                       as angles a plot shows directly
+``seat/driver``        geometry_msgs/AccelStamped      driver's seat vertical acceleration,
+                                                       unweighted, m/s^2 (frame
+                                                       ``driver_seat``, ``accel.linear.z``)
+``seat/passenger``     geometry_msgs/AccelStamped      the same at the rear passenger's seat
+                                                       (frame ``passenger_seat``)
+``seat/driver_wb``     geometry_msgs/AccelStamped      driver's seat, BS 6841 W_b weighted
+                                                       (the signal of eq. 9), m/s^2
+``seat/passenger_wb``  geometry_msgs/AccelStamped      passenger's seat, W_b weighted
+``struts``             sensor_msgs/JointState          per strut (``strut_front_left``, ...):
+                                                       position = stroke m (compression
+                                                       positive), effort = force N
+``tyres``              sensor_msgs/JointState          per tyre (``tyre_front_left``, ...):
+                                                       position = slip angle rad, effort =
+                                                       normal force N
+``steering``           sensor_msgs/JointState          ``front_road_wheel``: position = angle
+                                                       rad, velocity = rate rad/s
+=====================  ==============================  ======================================
 
 Every quantity the Imu carries is provided, so its covariances are zero ("unknown",
 sensor_msgs/Imu); a simulation has no sensor noise to state.  The accelerations are
@@ -48,7 +52,7 @@ from collections.abc import Mapping
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import AccelStamped
+from geometry_msgs.msg import AccelStamped, Vector3Stamped
 from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Header
 
@@ -61,6 +65,7 @@ SEATS = {'driver': 'acc_driver_mps2', 'passenger': 'acc_passenger_mps2'}
 #: Topic names (under ``~/telemetry/``) and their message types.
 TOPICS: dict[str, type] = {
     'imu': Imu,
+    'attitude': Vector3Stamped,
     **{f'seat/{seat}{suffix}': AccelStamped for seat in SEATS for suffix in ('', '_wb')},
     'struts': JointState, 'tyres': JointState, 'steering': JointState,
 }
@@ -123,6 +128,11 @@ def telemetry_messages(histories: Mapping[str, np.ndarray], index: int = 0,
         imu.linear_acceleration.y = float(h['lateral_accel_mps2'][k])
         imu.linear_acceleration.z = float(h['vertical_accel_mps2'][k])
         out['imu'].append(imu)
+        attitude = Vector3Stamped(header=Header(stamp=now, frame_id='base_link'))
+        attitude.vector.x = math.radians(h['roll_deg'][k])
+        attitude.vector.y = float(h['pitch_rad'][k])
+        attitude.vector.z = float(h['yaw_rad'][k])
+        out['attitude'].append(attitude)
         for seat, acc in seats.items():
             message = AccelStamped(header=Header(
                 stamp=now, frame_id=f'{seat.removesuffix("_wb")}_seat'))

@@ -8,6 +8,19 @@ Extra constraints from another scenario or a named metric::
 
     tune --scenario ride --constraint 'handling:f_hand<=0.8'
 
+The ride on another road than config/scenarios.yaml's: a road of config/road.yaml by
+name, or an OpenCRG (.crg) or CSV (.csv) file (sent as an absolute path: the workers
+read it); a file shorter than the ride run is refused unless ``--repeat-road`` says to
+repeat it (a warning in the workers' log names the period that introduces)::
+
+    tune --scenario ride --road belgian_block_measured
+    tune --scenario ride --road ~/tracks/gerotek_belgian.crg
+
+One recorded full-model run of a design instead of an optimisation (any scenario; in
+'mixed' the valves switch closed-loop), e.g. for a bag to look at in Foxglove::
+
+    tune --scenario mixed --evaluate --x0 0.5 0.5
+
 Prints the eq. 25 calibration's progress (full-model samples done of total; the first
 run of a model configuration spends them before its first iteration), then one line
 per Dynamic-Q iteration (iteration, f, largest violation, model runs so far) from the
@@ -20,8 +33,10 @@ Ctrl-C cancels the goal and exits with status 130.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import threading
+from pathlib import Path
 
 import rclpy
 from rclpy.action import ActionClient
@@ -39,7 +54,8 @@ from suspension_tuning.tuning import ConstraintSpec
 def parse_args(argv: list[str]) -> argparse.Namespace:
     """Parse the command-line options of ``tune``."""
     parser = argparse.ArgumentParser(prog='tune', description=__doc__.split('\n')[0])
-    parser.add_argument('--scenario', default='ride', help="'ride' or 'handling'")
+    parser.add_argument('--scenario', default='ride',
+                        help="'ride' or 'handling' ('mixed' too with --evaluate)")
     parser.add_argument('--n-vars', type=int, default=2, help='2 or 4 design variables')
     parser.add_argument('--x0', type=float, nargs='*', default=[],
                         help='normalised start point (default: centre of the design space)')
@@ -53,10 +69,43 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--integrator', default='',
                         help="full model: 'fixed_step' or 'variable_step' (default: the "
                              "simulation's, config/vehicle.yaml)")
+    parser.add_argument('--road', default='',
+                        help='ride road: a road of config/road.yaml, or a .crg or .csv file '
+                             "(default: config/scenarios.yaml's)")
+    parser.add_argument('--repeat-road', action='store_true',
+                        help='repeat a road file shorter than the run (a periodic excitation)')
+    parser.add_argument('--evaluate', action='store_true',
+                        help='one recorded full-model run of --x0 (default the centre), no '
+                             'optimisation')
     parser.add_argument('--action', default='/coordinator/optimise', help='action name')
     parser.add_argument('--server-timeout', type=float, default=30.0,
                         help='seconds to wait for the coordinator')
     return parser.parse_args(argv)
+
+
+def goal_road(road: str, repeat: bool = False) -> str:
+    """The goal's road text for ``--road`` and ``--repeat-road``.
+
+    A road file becomes its absolute path (the workers read it), as a YAML entry
+    ``{file: ..., repeat: true}`` with ``--repeat-road``; a road name stays a name.
+
+    Raises
+    ------
+    ValueError
+        ``--repeat-road`` without a road file.
+    """
+    if not road:
+        if repeat:
+            raise ValueError('--repeat-road needs --road with a road file')
+        return ''
+    path = Path(road).expanduser()
+    if path.suffix.lower() in ('.crg', '.csv') or path.is_file():
+        text = json.dumps(str(path.absolute()))
+        return f'{{file: {text}, repeat: true}}' if repeat else str(path.absolute())
+    if repeat:
+        raise ValueError(f'--repeat-road applies to a road file; {road!r} is a road of '
+                         'config/road.yaml, whose entry says repeat: true')
+    return road
 
 
 def format_feedback(feedback: Optimise.Feedback) -> str:
@@ -158,6 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(ros_args)
     try:  # checked here too, so that a typo is reported before any ROS set-up
         constraints = [ConstraintSpec.parse(text) for text in args.constraint]
+        road = goal_road(args.road, args.repeat_road)
     except ValueError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
@@ -177,12 +227,12 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr)
             return 2
         goal = Optimise.Goal(scenario=args.scenario, n_vars=args.n_vars, x0=args.x0,
-                             gradient_source=args.gradient,
+                             gradient_source='evaluate' if args.evaluate else args.gradient,
                              max_iterations=args.max_iterations, move_limit=args.move_limit,
                              constraints=[Constraint(scenario=c.scenario, quantity=c.quantity,
                                                      upper_bound=c.upper_bound)
                                           for c in constraints],
-                             integrator=args.integrator)
+                             integrator=args.integrator, road=road)
         sending = client.send_goal_async(
             goal, feedback_callback=lambda fb: print(format_feedback(fb.feedback),
                                                      flush=True))

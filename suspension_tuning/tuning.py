@@ -281,6 +281,11 @@ class TuningRequest:
         Options of the first-order correction of simplified gradients
         (:class:`~suspension_tuning.optim.correction.CorrectionOptions`; default:
         the secant correction).
+    road : str
+        Ride road in place of config/scenarios.yaml's: a road of config/road.yaml, a
+        road file or an entry as YAML (:func:`~suspension_tuning.vehicle.road.
+        resolve_road`); '' = the configured one.  Checked here (a bad road file is a bad
+        goal); the mixed scenario drives it too.
     """
 
     scenario: str
@@ -292,6 +297,7 @@ class TuningRequest:
     constraints: Sequence[Any] = ()
     integrator: str = ''
     correction: Mapping[str, Any] | None = None
+    road: str = ''
     start: Array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -315,6 +321,13 @@ class TuningRequest:
         object.__setattr__(self, 'correction',
                            CorrectionOptions.from_mapping(self.correction).as_dict())
         object.__setattr__(self, 'constraints', constraint_specs(self.constraints))
+        if self.road:
+            from suspension_tuning.vehicle.road import resolve_road
+            from suspension_tuning.vehicle.road_files import FileRoadSpec, file_length_m
+
+            spec = resolve_road(self.road)
+            if isinstance(spec, FileRoadSpec):
+                file_length_m(spec)  # an unreadable file is refused with the goal
 
     @property
     def constraint_scenarios(self) -> tuple[str, ...]:

@@ -244,10 +244,11 @@ class SimulationPool:
 
     def evaluate(self, scenario: str, n_vars: int, designs: np.ndarray,
                  return_inputs: bool = False, publish_telemetry: bool = False,
-                 integrator: str = '') -> list[EvaluateDesign.Response]:
+                 integrator: str = '', road: str = '') -> list[EvaluateDesign.Response]:
         """Evaluate designs (m, n_vars); return the chunk responses in design order.
 
-        ``integrator``: the full-model integrator ('' = each worker's parameter).
+        ``integrator``: the full-model integrator ('' = each worker's parameter);
+        ``road``: the ride road ('' = each worker's configured one).
 
         Raises
         ------
@@ -271,7 +272,7 @@ class SimulationPool:
                     scenario=scenario, n_vars=n_vars,
                     designs=designs[chunk].ravel().tolist(),
                     publish_telemetry=publish_telemetry and index == 0,
-                    return_inputs=return_inputs, integrator=integrator)))
+                    return_inputs=return_inputs, integrator=integrator, road=road)))
             self.calls += len(sent)
             outcomes = call_many(self.node, [(self.clients[worker], request)
                                              for _, worker, request in sent],

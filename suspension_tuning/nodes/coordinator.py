@@ -15,7 +15,10 @@ iterate, or the least violating one when none was feasible, and says which; also
 physical units), the history and the full-model, simplified-model and calibration run
 counts.  The run's configuration is published on ``/optimisation/run_config`` when a
 goal starts, every iteration on ``/optimisation/progress`` and the result on
-``/optimisation/result``, so that the recorder puts one run in one bag.  The loop
+``/optimisation/result``, so that the recorder puts one run in one bag.  A goal with
+gradient source 'evaluate' is one full-model run of its x0 instead, in any full-model
+scenario ('mixed' included, where the valves switch), published the same way: a
+recorded run of a design.  The loop
 itself is :func:`suspension_tuning.tuning.optimise`, shared with in-process runs.
 """
 
@@ -38,6 +41,7 @@ from suspension_tuning_interfaces.action import Optimise
 from suspension_tuning_interfaces.msg import CalibrationProgress, IterationRecord, TimeHistories
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
+from suspension_tuning.evaluation import scenarios as evaluation_scenarios
 from suspension_tuning.nodes._services import ServiceCallError, SimulationPool, call
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.correction import load_correction_options
@@ -49,11 +53,15 @@ from suspension_tuning.tuning import (
     FullEvaluation,
     RunCounter,
     TuningRequest,
+    centre,
     optimise,
     physical_settings,
 )
+from suspension_tuning.vehicle.design import validate_design
 
 CONFIG_DIR = config_dir()
+#: Goal gradient_source of a single recorded full-model run instead of an optimisation.
+EVALUATE = 'evaluate'
 #: Latched: a late subscriber (the recorder) still gets the run's configuration/result.
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -80,6 +88,24 @@ def configuration_yaml() -> str:
     """
     files = {path.name: read_yaml(path) for path in sorted(CONFIG_DIR.glob('*.yaml'))}
     return dump_yaml({'vehicle_configuration': files, 'code_version': code_version()})
+
+
+def ride_road_record(road: str) -> dict[str, Any]:
+    """The run configuration's record of the ride road: the goal's, else the configured one.
+
+    The road's name or file, and for a road file its path and SHA-256
+    (:func:`suspension_tuning.vehicle.road_files.road_identity`); the workers' model
+    fingerprint covers every file config/road.yaml names too.
+    """
+    from suspension_tuning.vehicle.params import load_scenarios_config
+    from suspension_tuning.vehicle.road_files import road_identity
+
+    source = 'goal' if road else 'config/scenarios.yaml ride.road'
+    try:
+        record = road_identity(road or str(load_scenarios_config()['ride']['road']))
+    except ValueError as error:
+        record = {'road': road, 'error': str(error)}
+    return {'source': source, **record}
 
 
 def record_to_msg(record: dict[str, Any], counter: RunCounter, t0: float) -> IterationRecord:
@@ -222,7 +248,8 @@ class CoordinatorNode(Node):
         return TuningRequest(goal.scenario, int(goal.n_vars), list(goal.x0) or None,
                              goal.gradient_source or 'simplified', options,
                              float(self.get_parameter('fd_step').value), constraints,
-                             integrator=goal.integrator, correction=self.correction)
+                             integrator=goal.integrator, correction=self.correction,
+                             road=goal.road)
 
     def _publish_run_config(self, request: TuningRequest) -> None:
         config = {
@@ -238,6 +265,7 @@ class CoordinatorNode(Node):
             'calibration_fit': {'min_r2': self.min_fit_r2},
             'model_fingerprint': self.pool.fingerprint,
             'simulation_models': self._worker_models(),
+            'ride_road': ride_road_record(request.road),
         }
         stamp = f'started_unix_s: {time.time()!r}\n'
         self.config_pub.publish(String(data=dump_yaml(config) + stamp + self.static_config_yaml))
@@ -258,7 +286,7 @@ class CoordinatorNode(Node):
                 scenario, request.n_vars, designs,
                 return_inputs=(request.gradient_source == 'simplified' and len(designs) == 1
                                and scenario == 'handling'),
-                integrator=request.integrator)
+                integrator=request.integrator, road=request.road)
             f = np.concatenate([np.asarray(r.f, float) for r in responses])
             g = np.concatenate([np.asarray(r.g, float).reshape(r.n_designs, r.n_constraints)
                                 for r in responses])
@@ -278,7 +306,7 @@ class CoordinatorNode(Node):
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
             response = call(self, self.gradient_client, EvaluateGradient.Request(
                 scenario=scenario, n_vars=request.n_vars, x=x.tolist(),
-                step=request.fd_step,
+                step=request.fd_step, road=request.road,
                 inputs=TimeHistories() if inputs is None else inputs), self.timeout_s,
                 self._stopped)
             if not response.success:
@@ -305,7 +333,8 @@ class CoordinatorNode(Node):
             response = call(self, self.calibrate_client, Calibrate.Request(
                 scenario=scenario, n_vars=request.n_vars,
                 n_samples=int(self.get_parameter('calibration_samples').value), force=False,
-                integrator=request.integrator, model_fingerprint=self.pool.fingerprint),
+                integrator=request.integrator, model_fingerprint=self.pool.fingerprint,
+                road=request.road),
                 self.timeout_s * 2, self._stopped)
         finally:
             self._calibrating = None
@@ -357,8 +386,78 @@ class CoordinatorNode(Node):
         finally:
             self._next_goal()
 
+    def _evaluate_run(self, goal_handle, t0: float) -> Optimise.Result:
+        """One full-model run of the goal's x0 as a recorded run (gradient_source 'evaluate').
+
+        Any full-model scenario, 'mixed' included (the valves switch only there): the
+        run configuration, one progress record (f, g and the largest violation), the
+        run's telemetry and the result are published as for an optimisation, so the
+        recorder puts the run in a bag of its own.
+        """
+        goal = goal_handle.request
+        try:
+            if goal.scenario not in evaluation_scenarios():
+                raise ValueError(f'unknown scenario {goal.scenario!r}; valid: '
+                                 f'{", ".join(evaluation_scenarios())}')
+            n_vars = int(goal.n_vars)
+            x = validate_design(list(goal.x0) or centre(n_vars), n_vars)[0]
+            if goal.road:
+                TuningRequest('ride', n_vars, x, road=goal.road)  # the road's checks
+        except ValueError as error:
+            goal_handle.abort()
+            return Optimise.Result(success=False, message=f'bad goal: {error}')
+        try:
+            fingerprint = self.pool.check_models()
+            refusal = None
+        except (ValueError, ServiceCallError) as error:
+            fingerprint, refusal = '', error
+        config = {'scenario': goal.scenario, 'n_vars': n_vars, 'x0': x.tolist(),
+                  'gradient_source': 'evaluate', 'kind': 'evaluation (one full-model run)',
+                  'integrator': goal.integrator or 'simulation default',
+                  'model_fingerprint': self.pool.fingerprint,
+                  'simulation_models': self._worker_models(),
+                  'ride_road': ride_road_record(goal.road)}
+        stamp = f'started_unix_s: {time.time()!r}\n'
+        self.config_pub.publish(String(data=dump_yaml(config) + stamp + self.static_config_yaml))
+        try:
+            if refusal is not None:
+                raise refusal
+            response = self.pool.evaluate(goal.scenario, n_vars, x[None, :],
+                                          publish_telemetry=True, integrator=goal.integrator,
+                                          road=goal.road)[0]
+        except (ValueError, ServiceCallError) as error:
+            self.get_logger().error(f'evaluation failed: {error}')
+            goal_handle.abort()
+            message = Optimise.Result(success=False, message=f'evaluation failed: {error}',
+                                      model_fingerprint=fingerprint,
+                                      wall_time_s=time.monotonic() - t0)
+            self.result_pub.publish(message)
+            return message
+        g = np.asarray(response.g, float)
+        violation = float(max(0.0, g.max())) if g.size else 0.0
+        counter = RunCounter()
+        counter.full_runs = 1
+        record = record_to_msg({'iteration': 0, 'x': x, 'f': response.f[0], 'g': g, 'rho': 0.0,
+                                'rho_next': 0.0, 'max_violation': violation}, counter, t0)
+        goal_handle.publish_feedback(Optimise.Feedback(phase='iteration', latest=record))
+        self.progress_pub.publish(record)
+        physical = physical_settings(x)
+        message = Optimise.Result(
+            success=True, message='evaluated: one full-model run of x0, no optimisation',
+            x=x.tolist(), f=float(response.f[0]), g=g.tolist(),
+            feasible=violation <= self.options.gtol, best_iteration=0,
+            max_violation=violation, physical_names=list(physical),
+            physical_values=list(physical.values()), iterations=0, history=[record],
+            wall_time_s=time.monotonic() - t0, model_fingerprint=fingerprint,
+            **counter.as_dict())
+        goal_handle.succeed()
+        self.result_pub.publish(message)
+        return message
+
     def _optimise(self, goal_handle) -> Optimise.Result:
         t0 = time.monotonic()
+        if goal_handle.request.gradient_source == EVALUATE:
+            return self._evaluate_run(goal_handle, t0)
         try:
             request = self._request(goal_handle.request)
         except ValueError as error:
@@ -423,7 +522,8 @@ class CoordinatorNode(Node):
             try:
                 self.pool.evaluate(request.scenario, request.n_vars,
                                    np.asarray(design.x, float)[None, :],
-                                   publish_telemetry=True, integrator=request.integrator)
+                                   publish_telemetry=True, integrator=request.integrator,
+                                   road=request.road)
             except (ValueError, ServiceCallError) as error:
                 self.get_logger().warning(f'telemetry run of the reported design failed: '
                                           f'{error}')

@@ -4,12 +4,17 @@ Service ``~/evaluate`` (EvaluateDesign): a scenario and one or many designs in; 
 objective f (eq. 9 or 10), the tyre-hop constraints g (eq. 11), named metrics, the
 simplified models' inputs of each design and the wall time out.  A bad request
 (unknown scenario, wrong length, NaN, out of bounds) gets ``success = false`` and the
-reason in ``error``; the node keeps serving.
+reason in ``error``; the node keeps serving.  A request's ``road`` drives the ride and
+mixed scenarios on another road than config/scenarios.yaml's (a road of
+config/road.yaml, a road file or an entry, :func:`suspension_tuning.vehicle.road.
+resolve_road`); a bad or too short road file is such a bad request.
 
 On request it publishes the time histories of the first design as telemetry on
 standard types, stamped with simulated time (:mod:`suspension_tuning.telemetry` has
 the table): ``~/telemetry/imu`` (sensor_msgs/Imu: the body's attitude, rates and
-longitudinal, lateral and vertical acceleration), ``~/telemetry/seat/{driver,passenger}``
+longitudinal, lateral and vertical acceleration), ``~/telemetry/attitude``
+(geometry_msgs/Vector3Stamped: roll, pitch and yaw angles, rad),
+``~/telemetry/seat/{driver,passenger}``
 and ``~/telemetry/seat/{driver,passenger}_wb`` (geometry_msgs/AccelStamped: each
 seat's vertical acceleration, unweighted and BS 6841 W_b weighted),
 ``~/telemetry/struts`` (JointState: stroke m, force N per strut),
@@ -205,7 +210,11 @@ class FullVehicleSimNode(Node):
             if self.fmu is None:
                 result = evaluation.evaluate(
                     request.scenario, designs, controllers=self._controllers(request, designs),
-                    integrator=request.integrator or self.get_parameter('integrator').value)
+                    integrator=request.integrator or self.get_parameter('integrator').value,
+                    road=request.road)
+            elif request.road:
+                raise ValueError('an FMU worker drives the roads its mapping names '
+                                 '(docs/fmu.md); a request\'s road is for the built-in model')
             else:
                 result = self.fmu.evaluate(request.scenario, designs)
         except ValueError as error:

@@ -8,10 +8,12 @@ its designs sent to another), a chunk of ``calibration_chunk`` designs at a time
 after each chunk ``~/calibration_progress`` (CalibrationProgress) says how many of
 the samples are done, which the coordinator passes on in its action feedback.  The
 scaling is cached in ``calibration_dir`` under a key of scenario, n_vars, samples, seed,
-a hash of the simplified models' configuration and the fingerprint of the workers'
-full model (:mod:`suspension_tuning.model_identity`), so it costs its N full runs once
-per model and is never used for another.  Workers whose fingerprints differ, or
-differ from the caller's (``model_fingerprint`` of the request), are refused.
+a hash of the simplified models' configuration, the fingerprint of the workers'
+full model (:mod:`suspension_tuning.model_identity`) and, for a request's own ride road
+(``road``), that road and its file's SHA-256, so it costs its N full runs once per model
+and road and is never used for another; the simplified model drives the same road.
+Workers whose fingerprints differ, or differ from the caller's (``model_fingerprint`` of
+the request), are refused.
 
 Service ``~/gradient`` (EvaluateGradient): the gradient of f and the Jacobian of g by
 central differences of the scaled simplified model, all 2n perturbations in one batch
@@ -22,6 +24,8 @@ request carries them.  Bad requests get ``success = false`` and the reason.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import time
 from pathlib import Path
 
@@ -44,6 +48,7 @@ from suspension_tuning.optim.simplified_gradient import (
     fit_calibration,
 )
 from suspension_tuning.vehicle.design import VARIABLE_NAMES, validate_design
+from suspension_tuning.vehicle.road_files import road_identity
 
 SCENARIOS = ('ride', 'handling')
 
@@ -70,7 +75,7 @@ class GradientEvaluatorNode(Node):
         directory = str(self.get_parameter('calibration_dir').value)
         self.calibration_dir = Path(directory or Path.home() / '.cache' / 'suspension_tuning'
                                     / 'calibration')
-        self.scalings: dict[tuple[str, int], Scaling] = {}
+        self.scalings: dict[tuple[str, int, str], Scaling] = {}
         self.simplified_runs = 0
         self.stopping = False  # set by destroy_node: a calibration stops waiting
         self.pool = SimulationPool(self, list(self.get_parameter('sim_workers').value),
@@ -86,6 +91,9 @@ class GradientEvaluatorNode(Node):
     # ---------------------------------------------------------------- calibrate
     def _cache_path(self, key: dict) -> Path:
         tail = f"_{key['integrator']}" if 'integrator' in key else ''
+        if 'road' in key:  # a request's own road: a short hash of its identity
+            tail += '_road_' + hashlib.sha256(json.dumps(key['road'], sort_keys=True)
+                                              .encode()).hexdigest()[:12]
         return self.calibration_dir / (f"v{key['calibration_version']}_"
                                        f"{key['scenario']}_{key['n_vars']}var_"
                                        f"{key['n_samples']}s_{key['seed']}_"
@@ -109,6 +117,8 @@ class GradientEvaluatorNode(Node):
             key = scaling_key(scenario, n_vars, n_samples, seed, fingerprint)
             if request.integrator:  # samples of a named integrator get their own cache
                 key['integrator'] = request.integrator
+            if request.road:  # and samples on a request's own road
+                key['road'] = road_identity(request.road)
             path = self._cache_path(key)
             scaling = None
             if path.exists() and not request.force:
@@ -119,7 +129,7 @@ class GradientEvaluatorNode(Node):
                     self.get_logger().warning(f'stale calibration {path}: {error}')
             if scaling is None:  # the designs are sampled only now (~7 ms)
                 x, _, _ = calibration_designs(n_vars, n_samples, seed)
-                scaling = self._calibrate_remote(scenario, n_vars, x, key)
+                scaling = self._calibrate_remote(scenario, n_vars, x, key, request.road)
                 response.n_full_runs = n_samples
                 path.parent.mkdir(parents=True, exist_ok=True)
                 scaling.save(path)
@@ -127,7 +137,7 @@ class GradientEvaluatorNode(Node):
             response.success, response.error = False, str(error)
             self.get_logger().error(f'calibration failed: {error}')
             return response
-        self.scalings[(scenario, n_vars)] = scaling
+        self.scalings[(scenario, n_vars, request.road)] = scaling
         for function in scaling.functions:
             response.function_names.append(function.name)
             response.simplified_min.append(function.f_m_min)
@@ -145,7 +155,7 @@ class GradientEvaluatorNode(Node):
         return response
 
     def _calibrate_remote(self, scenario: str, n_vars: int, x: np.ndarray,
-                          key: dict) -> Scaling:
+                          key: dict, road: str = '') -> Scaling:
         """Full-model samples from the simulation workers, then the eq. 25 fit."""
         # Only the handling model needs each sample's inputs (simplified_inputs.py).
         start = time.monotonic()
@@ -155,7 +165,8 @@ class GradientEvaluatorNode(Node):
             try:
                 answers += self.pool.evaluate(scenario, n_vars, part,
                                               return_inputs=scenario == 'handling',
-                                              integrator=key.get('integrator', ''))
+                                              integrator=key.get('integrator', ''),
+                                              road=road)
             except ValueError as error:
                 raise ValueError(f'full-model samples failed: {error}') from error
             self.progress_pub.publish(CalibrationProgress(
@@ -170,7 +181,7 @@ class GradientEvaluatorNode(Node):
         inputs = [simplified_inputs.unpack(scenario, message, x[i])
                   for i, message in enumerate(messages)] or None
         self.simplified_runs += len(x)
-        return fit_calibration(scenario, n_vars, x, full_f, full_g, inputs, key)
+        return fit_calibration(scenario, n_vars, x, full_f, full_g, inputs, key, road)
 
     # ----------------------------------------------------------------- gradient
     def _on_gradient(self, request: EvaluateGradient.Request,
@@ -179,12 +190,13 @@ class GradientEvaluatorNode(Node):
         try:
             scenario, n_vars = self._check(request.scenario, request.n_vars)
             x = validate_design(np.asarray(request.x, dtype=float), n_vars)[0]
-            scaling = self.scalings.get((scenario, n_vars))
+            scaling = self.scalings.get((scenario, n_vars, request.road))
             if scaling is None:
-                raise ValueError(f'no calibration for {scenario} with {n_vars} variables: '
+                road = f' on road {request.road!r}' if request.road else ''
+                raise ValueError(f'no calibration for {scenario} with {n_vars} variables{road}: '
                                  'call ~/calibrate first (eq. 25 needs full-model samples)')
             step = float(request.step or self.get_parameter('default_step').value)
-            source = SimplifiedGradient(scenario, n_vars, scaling, step)
+            source = SimplifiedGradient(scenario, n_vars, scaling, step, request.road)
             inputs = simplified_inputs.unpack(scenario, request.inputs, x)
             df, dg, values = source(x, inputs)
         except ValueError as error:

@@ -62,6 +62,7 @@ def simplified_values(
     n_vars: int,
     inputs: Any = None,
     scaling: Scaling | None = None,
+    road: str = '',
 ) -> Array:
     """Simplified-model values (batch, 1 + 4): objective then constraints FL..RR.
 
@@ -69,10 +70,10 @@ def simplified_values(
     ``tyre_hop_gradient.measure`` names: 'soft' (the default,
     :func:`~suspension_tuning.vehicle.metrics.soft_tyre_hop_constraints`, smooth in the
     design) or 'count' (eq. 11 as the full model counts it).  Scaled by eq. 25 when
-    ``scaling`` is given.
+    ``scaling`` is given.  ``road``: the ride road in place of the configured one.
     """
     inp = as_simplified_inputs(scenario, inputs)
-    out = run_simplified(scenario, x, n_vars, inp)
+    out = run_simplified(scenario, x, n_vars, inp, road)
     vals = np.column_stack([out['f'], out[constraint_measure_key()]])
     return scaling.apply(vals) if scaling is not None else vals
 
@@ -129,17 +130,19 @@ def fit_calibration(
     full_g: ArrayLike,
     inputs: list[SimplifiedInputs] | None,
     key: dict[str, Any],
+    road: str = '',
 ) -> Scaling:
     """Eq. 25 fit from full-model values at the calibration designs.
 
     The simplified model runs at the same designs; for handling each sample uses the
     inputs captured from its own full run (``inputs[i]``), as at an iterate.  ``key``
     is the calibration's :func:`~suspension_tuning.optim.scaling.scaling_key`, kept
-    with the scaling (the caller has it already: it names the cache file).
+    with the scaling (the caller has it already: it names the cache file).  ``road``:
+    the ride road of the full-model samples, which the pitch-plane model drives too.
     """
     full = np.column_stack([np.asarray(full_f, dtype=float), np.asarray(full_g, dtype=float)])
     if scenario == 'ride':
-        simp = simplified_values('ride', x, n_vars)
+        simp = simplified_values('ride', x, n_vars, road=road)
     else:
         if inputs is None or len(inputs) != len(x):
             raise ValueError('the handling calibration needs the full model inputs per sample')
@@ -229,6 +232,9 @@ class SimplifiedGradient:
     step : float, optional
         Central-difference half step in normalised units (default
         config/simplified_models.yaml gradient.step, 0.025).
+    road : str, optional
+        Ride road in place of config/scenarios.yaml's (a road name, a road file or an
+        entry as YAML); empty = the configured one.
 
     Notes
     -----
@@ -244,6 +250,7 @@ class SimplifiedGradient:
         n_vars: int,
         scaling: Scaling | None = None,
         step: float | None = None,
+        road: str = '',
     ) -> None:
         if scenario not in ('ride', 'handling'):
             raise ValueError(f"unknown scenario {scenario!r}; valid: 'ride', 'handling'")
@@ -253,6 +260,7 @@ class SimplifiedGradient:
                 if k in scaling.key and scaling.key[k] != v:
                     raise ValueError(f'scaling is for {k}={scaling.key[k]!r}, not {v!r}')
         self.scenario = scenario
+        self.road = str(road)
         self.n_vars = int(n_vars)
         self.scaling = scaling
         step = load_simplified_config()['gradient']['step'] if step is None else step
@@ -268,7 +276,8 @@ class SimplifiedGradient:
         """Scaled simplified values (batch, 5) at designs x (counted as runs)."""
         xb = validate_design(x, self.n_vars)
         self.n_runs += xb.shape[0]
-        return simplified_values(self.scenario, xb, self.n_vars, inputs, self.scaling)
+        return simplified_values(self.scenario, xb, self.n_vars, inputs, self.scaling,
+                                 self.road)
 
     def __call__(self, x: ArrayLike, inputs: Any = None) -> tuple[Array, Array, Array]:
         """Gradient of f (n,), Jacobian of g (4, n) and the values (5,) at x.

@@ -44,6 +44,7 @@ from suspension_tuning.vehicle.params import (
     load_scenarios_config,
     load_vehicle_params,
 )
+from suspension_tuning.vehicle.road_files import FileRoadSpec
 from suspension_tuning.vehicle.scenarios import (
     ScenarioResult,
     crossing_time,
@@ -76,19 +77,33 @@ def in_process_controllers(batch: int, params: ValveControllerParams | None = No
     return [ValveController(params) for _ in range(batch)]
 
 
-def mixed_road(cfg: dict[str, Any], params: VehicleParams, lead_in_m: float) -> RoadInput:
+def mixed_road(cfg: dict[str, Any], params: VehicleParams, lead_in_m: float,
+               road: str | None = None) -> RoadInput:
     """Belgian paving faded out into a smooth road before the lane change.
 
     The paving occupies x in [-(lead_in + fade + rough), -(lead_in + fade)], the fade
     the next ``fade_out_m``, then the road is flat from x = -lead_in onwards (lane 1
-    starts at x = 0).
+    starts at x = 0).  ``road``: the rough road in place of the ride scenario's (a
+    name, a file or an entry, :func:`~suspension_tuning.vehicle.road.resolve_road`); a
+    road file is driven as it is, flat after its end.
     """
-    spec = ride_road_spec(load_scenarios_config()['ride'])
+    ride = load_scenarios_config()['ride']
+    if road:
+        ride['road'] = road
+    spec = ride_road_spec(ride)
     rough, fade = float(cfg['rough_length_m']), float(cfg['fade_out_m'])
     track_end = handling_setup(params, load_scenarios_config()['handling'])[0].x_end_m
     length = rough + fade + lead_in_m + track_end + float(cfg['run_out_m']) + 20.0
-    spec = replace(spec, length_m=max(length, spec.length_m))
-    profile = road_mod.synthesise_tracks(spec)
+    if isinstance(spec, FileRoadSpec):
+        profile = road_mod.synthesise_tracks(spec)
+        dx = float(profile.x_m[1] - profile.x_m[0])
+        x = np.arange(int(np.ceil(max(length, profile.length_m) / dx)) + 1) * dx
+        profile = road_mod.RoadProfile(
+            x_m=x, z_left_m=np.interp(x, profile.x_m, profile.z_left_m, right=0.0),
+            z_right_m=np.interp(x, profile.x_m, profile.z_right_m, right=0.0))
+    else:
+        spec = replace(spec, length_m=max(length, spec.length_m))
+        profile = road_mod.synthesise_tracks(spec)
     x = np.asarray(profile.x_m, dtype=float)
     window = np.clip((rough + fade - x) / fade, 0.0, 1.0)
     window = 0.5 - 0.5 * np.cos(np.pi * window)
@@ -114,7 +129,8 @@ def vehicle_state(outputs: dict[str, np.ndarray], index: int, step: int,
 def run_mixed(x: np.ndarray, controllers: list[Controller] | None = None,
               params: VehicleParams | None = None, config: dict[str, Any] | None = None,
               valve_period_s: float | None = None,
-              setting: SuspensionSetting | None = None) -> ScenarioResult:
+              setting: SuspensionSetting | None = None,
+              road: str | None = None) -> ScenarioResult:
     """Simulate the mixed scenario with closed-loop valve control.
 
     Parameters
@@ -134,6 +150,8 @@ def run_mixed(x: np.ndarray, controllers: list[Controller] | None = None,
         Both states' settings of every design, in place of x's ride state beside the
         baseline handling state (``vehicle.passive``: passive and switched settings);
         x is then only recorded.
+    road : str, optional
+        The rough road in place of the ride scenario's (:func:`mixed_road`).
 
     Returns
     -------
@@ -166,7 +184,7 @@ def run_mixed(x: np.ndarray, controllers: list[Controller] | None = None,
     lead = float(cfg['lead_in_m'])
     start = -(float(cfg['rough_length_m']) + float(cfg['fade_out_m']) + lead)
     duration = (track.x_end_m + float(cfg['run_out_m']) - start) / speed
-    model = FullVehicleModel(params, mixed_road(cfg, params, lead))
+    model = FullVehicleModel(params, mixed_road(cfg, params, lead, road))
     model.reset(setting, ValveState.ride(batch), speed, x0_m=start + params.b_m,
                 driver=driver, speed_controller=speed_ctrl)
     n_periods = int(round(duration / period))

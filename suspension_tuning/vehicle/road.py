@@ -1,4 +1,7 @@
-"""Road profiles: ISO 8608 random roads, sett pavings, discrete bumps, flat road.
+"""Road profiles: ISO 8608 random roads, sett pavings, road files, discrete bumps, flat road.
+
+Roads measured elsewhere come from files (OpenCRG or CSV, key ``file`` in road.yaml):
+:mod:`suspension_tuning.vehicle.road_files`.
 
 Two random road models, each with left and right wheel tracks (config/road.yaml, key
 ``model``):
@@ -250,7 +253,7 @@ ROAD_MODELS: dict[str, type[RoadSpec]] = {'iso8608': RoadSpec, 'sett_paving': Se
 """Values of the ``model`` key of a road.yaml entry and the spec class each one builds."""
 
 
-def load_road_spec(name: str = 'belgian_paving', path: str | Path | None = None) -> RoadSpec:
+def load_road_spec(name: str = 'belgian_paving', path: str | Path | None = None):
     """Load a named road specification from a YAML file (default config/road.yaml).
 
     Parameters
@@ -262,30 +265,36 @@ def load_road_spec(name: str = 'belgian_paving', path: str | Path | None = None)
 
     Returns
     -------
-    RoadSpec
-        The specification.
+    RoadSpec or FileRoadSpec
+        The specification (a road with a ``file`` key is a
+        :class:`~suspension_tuning.vehicle.road_files.FileRoadSpec`, its relative path
+        resolved against the YAML file's folder).
     """
     p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
     data = read_yaml(p)
     roads = data.get('roads', {})
     if name not in roads:
         raise ValueError(f'road {name!r} not found in {p}; available: {sorted(roads)}')
-    return road_spec_from_yaml_dict(roads[name])
+    return road_spec_from_yaml_dict(roads[name], base_dir=p.parent)
 
 
-def road_spec_from_yaml_dict(d: dict) -> RoadSpec:
-    """Build an ISO 8608 or sett-paving spec from one entry of road.yaml.
+def road_spec_from_yaml_dict(d: dict, base_dir: str | Path | None = None):
+    """Build an ISO 8608, sett-paving or file road spec from one entry of road.yaml.
 
     Parameters
     ----------
     d : dict
         Field names of the spec class plus an optional ``model`` key, one of
-        :data:`ROAD_MODELS` ('iso8608' when omitted).
+        :data:`ROAD_MODELS` ('iso8608' when omitted), or 'file' (implied by a ``file``
+        key).
+    base_dir : str or Path, optional
+        Folder a relative ``file`` is relative to (default the config folder).
 
     Returns
     -------
-    RoadSpec
-        A :class:`RoadSpec` or a :class:`SettPavingSpec`.
+    RoadSpec or FileRoadSpec
+        A :class:`RoadSpec`, a :class:`SettPavingSpec` or a
+        :class:`~suspension_tuning.vehicle.road_files.FileRoadSpec`.
 
     Raises
     ------
@@ -294,11 +303,64 @@ def road_spec_from_yaml_dict(d: dict) -> RoadSpec:
     """
     if not isinstance(d, dict):
         raise ValueError(f'road spec must be a mapping, got {type(d).__name__}')
+    if 'file' in d or d.get('model') == 'file':
+        from .road_files import FileRoadSpec
+
+        return FileRoadSpec.from_yaml_dict(
+            d, base_dir=base_dir if base_dir is not None else DEFAULT_CONFIG_PATH.parent)
     fields = dict(d)
     model = fields.pop('model', 'iso8608')
     if model not in ROAD_MODELS:
-        raise ValueError(f'unknown road model {model!r}; valid models: {ROAD_MODELS}')
+        raise ValueError(f"unknown road model {model!r}; valid models: {sorted(ROAD_MODELS)} "
+                         "or a road file (key 'file')")
     return ROAD_MODELS[model].from_yaml_dict(fields)
+
+
+ROAD_FILE_SUFFIXES = ('.crg', '.csv')
+
+
+def resolve_road(road, path: str | Path | None = None):
+    """A road as a scenario or a goal names it: a name, a file, or an entry of its own.
+
+    Parameters
+    ----------
+    road : str or dict
+        A road of config/road.yaml by name; a path to an OpenCRG (``.crg``) or CSV
+        (``.csv``) file (relative to the working folder); a YAML mapping of a road entry
+        as text (``'{file: /data/track.crg, repeat: true}'``) or as a dict.
+    path : str or Path, optional
+        The road.yaml to look names up in (default config/road.yaml).
+
+    Returns
+    -------
+    RoadSpec or FileRoadSpec
+
+    Raises
+    ------
+    ValueError
+        An unknown name (with the names there are), or a bad entry.
+    """
+    if isinstance(road, dict):
+        return road_spec_from_yaml_dict(road, base_dir=Path.cwd())
+    if not isinstance(road, str) or not road.strip():
+        raise ValueError(f'a road is a name, a file or a mapping, got {road!r}')
+    text = road.strip()
+    if text.startswith('{'):
+        import yaml
+
+        try:
+            entry = yaml.safe_load(text)
+        except yaml.YAMLError as error:
+            raise ValueError(f'road {text!r} is not a YAML mapping: {error}') from None
+        return resolve_road(entry, path)
+    p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
+    roads = read_yaml(p).get('roads', {})
+    if text in roads:
+        return load_road_spec(text, p)
+    if Path(text).suffix.lower() in ROAD_FILE_SUFFIXES or Path(text).is_file():
+        return road_spec_from_yaml_dict({'file': str(Path(text).expanduser().absolute())})
+    raise ValueError(f'road {text!r} is neither a road of {p} ({", ".join(sorted(roads))}) nor '
+                     'a .crg or .csv file')
 
 
 def iso8608_psd(n_cyc_per_m: np.ndarray, spec: RoadSpec) -> np.ndarray:
@@ -506,9 +568,10 @@ def synthesise_tracks(spec: RoadSpec) -> RoadProfile:
 
     Parameters
     ----------
-    spec : RoadSpec or SettPavingSpec
-        Road specification: an ISO 8608 road, or a sett paving (ISO 8608 base plus the
-        stone layer of :func:`sett_layer`).
+    spec : RoadSpec, SettPavingSpec or FileRoadSpec
+        Road specification: an ISO 8608 road, a sett paving (ISO 8608 base plus the
+        stone layer of :func:`sett_layer`), or a road file
+        (:func:`~suspension_tuning.vehicle.road_files.file_road_profile`).
 
     Returns
     -------
@@ -517,6 +580,10 @@ def synthesise_tracks(spec: RoadSpec) -> RoadProfile:
         road the last sample repeats the first (the synthesised road is periodic with
         period N dx); the stone layer of a sett paving is not periodic.
     """
+    from .road_files import FileRoadSpec, file_road_profile
+
+    if isinstance(spec, FileRoadSpec):
+        return file_road_profile(spec)
     if not isinstance(spec, RoadSpec):
         raise ValueError(f'spec must be a RoadSpec, got {type(spec).__name__}')
     x, z_left, z_right = _iso8608_tracks(spec)

@@ -89,17 +89,39 @@ class ScenarioResult:
     integrator: dict = field(default_factory=dict, repr=False)
 
 
+#: Road beyond the rear axle's end position that a ride run needs, m: [E] the wheelbase
+#: (2.794 m, Defender 110) and half a tyre contact patch, rounded up.
+RIDE_ROAD_MARGIN_M = 5.0
+
+
 def ride_road_spec(cfg: dict) -> road_mod.RoadSpec:
-    """Road spec of the ride scenario: config/road.yaml entry plus the overrides."""
-    spec = road_mod.load_road_spec(cfg['road'])
+    """Road spec of the ride scenario: its road plus the overrides.
+
+    ``cfg['road']`` names a road of config/road.yaml, a road file (.crg, .csv) or an
+    entry of its own (:func:`~suspension_tuning.vehicle.road.resolve_road`).  A road
+    file is checked against the run's length (start, speed x duration and
+    :data:`RIDE_ROAD_MARGIN_M`): a shorter one is refused, or repeated when its entry
+    says ``repeat: true`` (with a warning naming the period,
+    :func:`~suspension_tuning.vehicle.road_files.fit_to_run`).
+    """
+    from .road_files import FileRoadSpec, fit_to_run
+
+    spec = road_mod.resolve_road(cfg['road'])
     over = cfg.get('road_overrides') or {}
-    return dataclasses.replace(spec, **over) if over else spec
+    spec = dataclasses.replace(spec, **over) if over else spec
+    if isinstance(spec, FileRoadSpec):
+        speed = float(cfg['speed_kmh']) / 3.6
+        needed = (float(cfg['start_rear_axle_at_m']) + speed * float(cfg['duration_s'])
+                  + RIDE_ROAD_MARGIN_M)
+        spec = fit_to_run(spec, needed, speed, f"the ride run ({cfg['duration_s']:g} s at "
+                                               f"{cfg['speed_kmh']:g} km/h)")
+    return spec
 
 
 @functools.lru_cache(maxsize=8)
 def _ride_road(spec: road_mod.RoadSpec, contact_length_m: float) -> tuple[RoadInput, float]:
     prof = road_mod.synthesise_tracks(spec)
-    return RoadInput.from_profile(prof, contact_length_m), float(spec.length_m)
+    return RoadInput.from_profile(prof, contact_length_m), prof.length_m
 
 
 def _check_name(name: str) -> None:

@@ -76,10 +76,22 @@ class SimplifiedInputs:
         return cls('handling', x, inputs)
 
 
-@functools.lru_cache(maxsize=2)
-def pitch_plane_model() -> PitchPlaneModel:
-    """The default pitch-plane model (config files), built once per process."""
-    return PitchPlaneModel()
+@functools.lru_cache(maxsize=4)
+def pitch_plane_model(road: str = '') -> PitchPlaneModel:
+    """The pitch-plane model (config files), built once per process and road.
+
+    ``road``: the ride road in place of config/scenarios.yaml's (a road name, a road
+    file or an entry as YAML, :func:`~suspension_tuning.vehicle.road.resolve_road`).
+    """
+    if not road:
+        return PitchPlaneModel()
+    from .params import load_scenarios_config, load_vehicle_params
+    from .pitch_plane import RideSetup
+
+    params = load_vehicle_params()
+    scenarios = load_scenarios_config()
+    scenarios['ride']['road'] = road
+    return PitchPlaneModel(params, RideSetup.from_scenario_config(params, scenarios))
 
 
 @functools.lru_cache(maxsize=2)
@@ -89,7 +101,8 @@ def handling_model() -> HandlingModel:
 
 
 def run_simplified(
-    scenario: str, x: np.ndarray, n_vars: int, inputs: SimplifiedInputs | None = None
+    scenario: str, x: np.ndarray, n_vars: int, inputs: SimplifiedInputs | None = None,
+    road: str = '',
 ) -> dict[str, np.ndarray]:
     """Evaluate the simplified model of a scenario for a batch of designs.
 
@@ -103,6 +116,8 @@ def run_simplified(
         2 or 4.
     inputs : SimplifiedInputs, optional
         Required for 'handling' (captured from the full model's run).
+    road : str
+        Ride road in place of the configured one (:func:`pitch_plane_model`).
 
     Returns
     -------
@@ -114,7 +129,7 @@ def run_simplified(
             f'unknown scenario {scenario!r}; valid: {", ".join(SIMPLIFIED_SCENARIOS)}'
         )
     if scenario == 'ride':
-        return pitch_plane_model().evaluate(x, n_vars)
+        return pitch_plane_model(road).evaluate(x, n_vars)
     if inputs is None or inputs.handling is None:
         raise ValueError('the handling model needs SimplifiedInputs from a full handling run')
     if inputs.scenario != 'handling':
