@@ -99,7 +99,9 @@ def fmus(tmp_path_factory) -> dict[str, str]:
 
     ``ride_inputs`` (FMI 2.0, road under each wheel as inputs), ``own_road`` (FMI 3.0,
     a road of its own, declared units), ``failing`` (FMI 2.0, fails mid-run for some
-    designs) and ``defender`` (FMI 2.0, the product's own full model behind FMI).
+    designs), ``faulty`` (FMI 2.0, raises, returns NaN, hangs, segfaults or exits its
+    process mid-run for some designs) and ``defender`` (FMI 2.0, the product's own full
+    model behind FMI).
     """
     from pythonfmu.builder import FmuBuilder
     from pythonfmu3.builder import FmuBuilder as Fmu3Builder
@@ -117,5 +119,7 @@ def fmus(tmp_path_factory) -> dict[str, str]:
                                               project_files=plate)),
         'failing': str(FmuBuilder.build_FMU(source('FailingRide.py'), dest=dest,
                                             project_files=plate)),
+        'faulty': str(FmuBuilder.build_FMU(source('FaultyRide.py'), dest=dest,
+                                           project_files=plate)),
         'defender': str(FmuBuilder.build_FMU(source('DefenderFmu.py'), dest=dest)),
     }

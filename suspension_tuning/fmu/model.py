@@ -16,16 +16,23 @@ the same code as the built-in model
 applied here; :func:`~suspension_tuning.vehicle.scenarios.handling_objective`).  It
 returns what :func:`suspension_tuning.evaluation.evaluate` returns.  A design whose
 run fails, stops early or gives a non-finite output raises :class:`FmuRunError`
-naming the design.
+naming the design, the simulation time reached and the FMU's own last messages (its FMI
+logger callback, :class:`FmuMessage`; each message also goes to ``on_message``).
+:mod:`suspension_tuning.fmu.isolated` runs the same designs in child processes that
+can be stopped.
 """
 
 from __future__ import annotations
 
+import collections
 import hashlib
+import re
 import shutil
 import tempfile
 import time
 import zipfile
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree
@@ -49,8 +56,18 @@ INPUT_CAUSALITIES = ('input',)
 OUTPUT_CAUSALITIES = ('output',)
 #: fmi2Fatal / fmi3Fatal: the instance may not be called again.
 FMI_FATAL = 4
-#: FMU libraries of closed models, kept loaded (FmuModel.close).
+#: FMU libraries of closed models, kept loaded (FmuModel.close), and instances left after a
+#: fatal status (with the logger callbacks they may still call).
 _LOADED_LIBRARIES: list = []
+#: FMI status names by value (fmi2Status / fmi3Status), for messages.
+FMI_STATUS = ('ok', 'warning', 'discard', 'error', 'fatal', 'pending')
+#: Messages of one design passed on to ``on_message``: an FMU with debug logging may
+#: write one per step; the rest of the design's messages are counted, not passed on.
+MESSAGES_PER_DESIGN = 100
+#: The FMU's last messages of a failed design quoted in its error.
+MESSAGES_IN_ERROR = 5
+#: Characters of one message kept (an FMU's traceback can run to pages).
+MESSAGE_CHARS = 400
 
 
 class FmuConfigError(ValueError):
@@ -59,6 +76,114 @@ class FmuConfigError(ValueError):
 
 class FmuRunError(RuntimeError):
     """A design whose FMU run failed, stopped early, or gave NaN or infinite outputs."""
+
+
+def design_label(index: int, x: np.ndarray) -> str:
+    """``design 1 (x = [0.9, 0.4])``: how errors name a design."""
+    return f'design {index} (x = {np.round(np.asarray(x, float), 6).tolist()})'
+
+
+@dataclass(frozen=True)
+class FmuMessage:
+    """One message the FMU logged through the FMI logger callback.
+
+    Attributes
+    ----------
+    design : int
+        Index of the design in its request.
+    time_s : float
+        Simulation time of the step during which it came, s.
+    status : int
+        FMI status (0 ok, 1 warning, 2 discard, 3 error, 4 fatal).
+    category : str
+        The FMU's log category ('' when it gives none).
+    text : str
+        The message, on one line.
+    """
+
+    design: int
+    time_s: float
+    status: int
+    category: str
+    text: str
+
+    def __str__(self) -> str:
+        """``[fatal] category: text``."""
+        status = FMI_STATUS[self.status] if 0 <= self.status < len(FMI_STATUS) else self.status
+        return f'[{status}] ' + (f'{self.category}: ' if self.category else '') + self.text
+
+
+class _FmuLog:
+    """The FMI logger callback of one design's instance: keeps and passes on its messages."""
+
+    def __init__(self, design: int, clock: Callable[[], float],
+                 sink: Callable[[FmuMessage], None] | None) -> None:
+        self.design, self.clock, self.sink = design, clock, sink
+        self.count = 0
+        self.recent: collections.deque[FmuMessage] = collections.deque(maxlen=MESSAGES_IN_ERROR)
+        self.callbacks = None
+
+    def add(self, status: int, category: Any, message: Any) -> None:
+        try:  # an exception here would be printed by ctypes and lost
+            def text(value: Any) -> str:
+                if isinstance(value, bytes):
+                    value = value.decode('utf-8', 'replace')
+                return re.sub(r'\s+', ' ', str(value or '')).strip()
+            body = text(message)
+            if len(body) > MESSAGE_CHARS:
+                body = body[:MESSAGE_CHARS] + ' ...'
+            entry = FmuMessage(self.design, float(self.clock()), int(status), text(category),
+                               body)
+            self.count += 1
+            self.recent.append(entry)
+            if self.sink is not None and self.count <= MESSAGES_PER_DESIGN:
+                self.sink(entry)
+            elif self.sink is not None and self.count == MESSAGES_PER_DESIGN + 1:
+                self.sink(FmuMessage(self.design, entry.time_s, 0, '',
+                                     f'more than {MESSAGES_PER_DESIGN} messages: the rest of '
+                                     'this design\'s are not logged'))
+        except Exception:  # noqa: BLE001,S110 - logging must never fail the run
+            pass
+
+    def fmi2(self, _env, _instance, status, category, message) -> None:
+        """fmi2CallbackLogger (after FMPy's proxy has formatted the message)."""
+        self.add(status, category, message)
+
+    def fmi3(self, _env, status, category, message) -> None:
+        """fmi3LogMessageCallback."""
+        self.add(status, category, message)
+
+    def instantiate(self, slave, fmi3: bool) -> None:
+        """``slave.instantiate`` with this logger and logging on."""
+        if fmi3:
+            slave.instantiate(loggingOn=True, logMessage=self.fmi3)
+            return
+        from ctypes import byref
+
+        from fmpy import calloc, free
+        from fmpy.fmi2 import (
+            fmi2CallbackAllocateMemoryTYPE,
+            fmi2CallbackFreeMemoryTYPE,
+            fmi2CallbackFunctions,
+            fmi2CallbackLoggerTYPE,
+        )
+        callbacks = fmi2CallbackFunctions()
+        callbacks.logger = fmi2CallbackLoggerTYPE(self.fmi2)
+        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        try:  # FMPy's native proxy formats the printf-style arguments ctypes cannot pass
+            from fmpy.logging import addLoggerProxy
+            addLoggerProxy(byref(callbacks))
+        except Exception:  # noqa: BLE001,S110 - then the messages come unformatted
+            pass
+        self.callbacks = callbacks  # FMPy keeps it on the slave too
+        slave.instantiate(callbacks=callbacks, loggingOn=True)
+
+    def summary(self) -> str:
+        """`` The FMU said: [fatal] ...; [error] ...`` (its last messages), or ''."""
+        if not self.recent:
+            return ''
+        return ' The FMU said: ' + '; '.join(str(m) for m in self.recent)
 
 
 def _require_fmpy():
@@ -71,6 +196,9 @@ def _require_fmpy():
 
 class FmuModel:
     """A checked FMU with its mapping, evaluating designs like the built-in model.
+
+    Each design runs in this process; ``on_message`` (None or a callable) receives the
+    FMU's log messages (:class:`FmuMessage`) as they come.
 
     Parameters
     ----------
@@ -88,6 +216,8 @@ class FmuModel:
     MappingError
         The mapping file itself is bad.
     """
+
+    on_message: Callable[[FmuMessage], None] | None = None
 
     def __init__(self, fmu_path: str | Path, mapping: FmuMapping | str | Path) -> None:
         fmpy = _require_fmpy()
@@ -302,8 +432,12 @@ class FmuModel:
         return np.column_stack(cols)
 
     def _run_one(self, sm: ScenarioMapping, index: int, x: np.ndarray, values: dict,
-                 inputs: np.ndarray | None) -> np.ndarray:
-        """Outputs (n_outputs, n_steps + 1) in FMU units of one design on a fresh instance."""
+                 inputs: np.ndarray | None, progress: Any = None) -> np.ndarray:
+        """Outputs (n_outputs, n_steps + 1) in FMU units of one design on a fresh instance.
+
+        ``progress`` (optional, e.g. a ``multiprocessing.RawValue('d')``): its ``value`` is
+        set to the simulation time at the start of every step, s.
+        """
         fmi3 = self.model_description.fmiVersion == '3.0'
         names = [ref.name for ref in sm.outputs.values()]
         out_vr = [self.variables[n].valueReference for n in names]
@@ -316,9 +450,12 @@ class FmuModel:
         put = slave.setFloat64 if fmi3 else slave.setReal
         t = t0
         fatal = False
+        log = _FmuLog(index, lambda: t, self.on_message)
+        if progress is not None:
+            progress.value = t0
         try:
             try:
-                slave.instantiate()
+                log.instantiate(slave, fmi3)
                 for name, value in values.items():
                     self._set(slave, name, value)
                 if fmi3:
@@ -332,6 +469,8 @@ class FmuModel:
                 samples[:, 0] = get(out_vr)
                 for k in range(n):
                     t = t0 + k * h
+                    if progress is not None:
+                        progress.value = t
                     if inputs is not None:
                         put(in_vr, inputs[k].tolist())
                     status = slave.doStep(currentCommunicationPoint=t, communicationStepSize=h)
@@ -348,16 +487,26 @@ class FmuModel:
                 raise
             finally:
                 # After a fatal status FMI allows no further call on the instance (not
-                # even freeing it): it is left as it is.  Its library stays loaded.
-                if not fatal and getattr(slave, 'component', None) is not None:
+                # even freeing it): it is left as it is, with the logger it may still
+                # call.  Its library stays loaded.
+                if fatal:
+                    _LOADED_LIBRARIES.append((slave, log))
+                elif getattr(slave, 'component', None) is not None:
                     try:
                         slave.freeInstance()
                     except Exception:  # noqa: BLE001,S110 - a failed instance may not free
                         pass
         except Exception as error:  # noqa: BLE001 - every FMU failure names the design
-            raise FmuRunError(f'design {index} (x = {np.round(x, 6).tolist()}): the FMU '
-                              f'failed at t = {t:.6g} s: {error}') from error
+            said = log.summary()
+            cause = f'{str(error).rstrip(".")}.{said}' if said else str(error)
+            raise FmuRunError(f'{design_label(index, x)}: the FMU failed at t = {t:.6g} s: '
+                              f'{cause}') from error
         return samples
+
+    def _run_designs(self, sm: ScenarioMapping, x: np.ndarray, values: list[dict],
+                     inputs: np.ndarray | None) -> np.ndarray:
+        """Outputs (m, n_outputs, n_steps + 1) in FMU units of each design, in order."""
+        return np.stack([self._run_one(sm, i, x[i], values[i], inputs) for i in range(len(x))])
 
     def evaluate(self, scenario: str, designs: np.ndarray, controllers: Any = None,
                  **_: Any) -> DesignEvaluation:
@@ -385,7 +534,7 @@ class FmuModel:
         t_rel = sm.step_size_s * np.arange(sm.n_steps + 1)
         inputs = self._road_inputs(sm, t_rel) if sm.road is not None else None
         start = time.perf_counter()
-        runs = np.stack([self._run_one(sm, i, x[i], values[i], inputs) for i in range(len(x))])
+        runs = self._run_designs(sm, x, values, inputs)
         wall = time.perf_counter() - start
         conv = self.conversions[scenario]
         # Each channel contiguous per design: reductions over a strided view sum in an
@@ -464,18 +613,30 @@ class FmuModel:
 
 
 MODELS = ('builtin', 'fmu')
+#: Where a worker runs its FMU: in child processes that can be stopped, or in its own.
+ISOLATIONS = ('process', 'none')
 
 
-def worker_model(model: str, fmu_path: str = '', fmu_mapping: str = '') -> FmuModel | None:
+def worker_model(model: str, fmu_path: str = '', fmu_mapping: str = '',
+                 isolation: str = 'process', **options: Any) -> FmuModel | None:
     """The full model a simulation worker runs: None (built-in) or an FmuModel.
 
-    The three settings must agree, so that a worker never starts half-configured.
+    The settings must agree, so that a worker never starts half-configured.
+
+    Parameters
+    ----------
+    model, fmu_path, fmu_mapping : str
+        The worker's parameters of those names.
+    isolation : str
+        'process' (each design in a child process that can be stopped:
+        :class:`~suspension_tuning.fmu.isolated.IsolatedFmuModel`, which takes
+        ``options``) or 'none' (in this process; ``options`` may give ``on_message``).
 
     Raises
     ------
     FmuConfigError
-        An unknown model, 'fmu' without fmu_path or fmu_mapping, 'builtin' with either
-        set, or an FMU and mapping that do not fit (see :class:`FmuModel`).
+        An unknown model or isolation, 'fmu' without fmu_path or fmu_mapping, 'builtin'
+        with either set, or an FMU and mapping that do not fit (see :class:`FmuModel`).
     MappingError
         A bad mapping file.
     """
@@ -493,4 +654,12 @@ def worker_model(model: str, fmu_path: str = '', fmu_mapping: str = '') -> FmuMo
     if missing:
         raise FmuConfigError(f'model fmu needs {" and ".join(missing)} (-p fmu_path:=<file.fmu> '
                              '-p fmu_mapping:=<mapping.yaml>, docs/fmu.md)')
-    return FmuModel(fmu_path, fmu_mapping)
+    if isolation not in ISOLATIONS:
+        raise FmuConfigError(f'fmu_isolation must be one of {", ".join(ISOLATIONS)}, got '
+                             f'{isolation!r}')
+    if isolation == 'process':
+        from suspension_tuning.fmu.isolated import IsolatedFmuModel
+        return IsolatedFmuModel(fmu_path, fmu_mapping, **options)
+    fmu = FmuModel(fmu_path, fmu_mapping)
+    fmu.on_message = options.get('on_message')
+    return fmu
