@@ -7,6 +7,7 @@ simulation time reached, the cause and the FMU's own words, and the next design 
 """
 
 import os
+import re
 import threading
 import time
 
@@ -116,8 +117,10 @@ def test_fmu_run_in_progress_is_stopped_by_a_cancel_and_by_its_caller(fmus):
             assert time.monotonic() - start < 1.0  # POLL_S = 0.25 s and a kill
             assert isinstance(outcome[0], FmuRunCancelledError), outcome
             reason = 'cancel requested' if how == 'cancel' else 'the worker is stopping'
-            assert f'FMU run stopped ({reason}): design 1 (x = [0.9, 0.4]) at t = 0.202 s' \
-                in str(outcome[0])
+            # The warning comes at the end of the step from 0.200 s, the hang in the step
+            # from 0.202 s: a cancel right after the warning finds the run at either.
+            assert re.search(rf'FMU run stopped \({reason}\): design 1 \(x = \[0\.9, 0\.4\]\) '
+                             r'at t = 0\.20[02] s', str(outcome[0])), outcome
         stop.clear()
         assert not fmu.cancel()  # nothing runs: nothing to stop
         assert np.isfinite(fmu.evaluate('ride', GOOD).f).all()
