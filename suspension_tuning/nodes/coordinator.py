@@ -35,10 +35,12 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
+from std_srvs.srv import Trigger
 from suspension_tuning_interfaces.action import Optimise
 from suspension_tuning_interfaces.msg import CalibrationProgress, IterationRecord, TimeHistories
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
+from suspension_tuning.nodes._parameters import declare_numbers
 from suspension_tuning.nodes._services import ServiceCallError, SimulationPool, call
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.correction import load_correction_options
@@ -47,6 +49,7 @@ from suspension_tuning.paths import config_dir, dump_yaml, read_yaml
 from suspension_tuning.reported_design import design_success, reported_design, result_message
 from suspension_tuning.tuning import (
     FullEvaluation,
+    RunCancelled,
     RunCounter,
     TuningRequest,
     optimise,
@@ -144,9 +147,8 @@ class CoordinatorNode(Node):
         super().__init__('coordinator', **kwargs)
         self.declare_parameter('sim_workers', ['/full_vehicle_sim'])
         self.declare_parameter('gradient_node', '/gradient_evaluator')
-        self.declare_parameter('call_timeout_s', 600.0)
-        self.declare_parameter('calibration_samples', 16)
-        self.declare_parameter('fd_step', 0.025)
+        declare_numbers(self, {'call_timeout_s': 600.0, 'calibration_samples': 16,
+                               'fd_step': 0.025})
         self.declare_parameter('optimiser_config', '')
         self.declare_parameter('optimiser_section', 'vehicle')
         # One more full run at the reported design, publishing its telemetry for the bag; a
@@ -155,12 +157,17 @@ class CoordinatorNode(Node):
         # Seconds a goal's result is kept for late result requests after the goal ends
         # (rcl's default 900 s).  Every status message carries every goal kept, and an
         # action client converts all of them each time (config/graph.yaml).
-        self.declare_parameter('result_timeout_s', 10.0)
+        declare_numbers(self, {'result_timeout_s': 10.0})
         self.timeout_s = float(self.get_parameter('call_timeout_s').value)
         self.stopping = False  # set by destroy_node: a running goal stops waiting
         clients = ReentrantCallbackGroup()
         self.pool = SimulationPool(self, list(self.get_parameter('sim_workers').value),
                                    self.timeout_s, clients, self._stopped)
+        # A cancelled goal stops the workers' FMU runs in progress (~/cancel).
+        self.cancel_clients = [self.create_client(Trigger, f'{str(w).rstrip("/")}/cancel',
+                                                  callback_group=clients)
+                               for w in self.get_parameter('sim_workers').value]
+        self._cancelling: Any = None  # the goal handle whose cancel was accepted
         # The full model each worker runs (its latched ~/model: built-in, or the FMU's
         # file, identity and mapping), recorded in every run configuration.
         self.worker_models: dict[str, Any] = {}
@@ -198,7 +205,7 @@ class CoordinatorNode(Node):
             self, Optimise, '~/optimise', execute_callback=self._execute,
             goal_callback=lambda _: GoalResponse.ACCEPT,
             handle_accepted_callback=self._on_accepted,
-            cancel_callback=lambda _: CancelResponse.ACCEPT,
+            cancel_callback=self._on_cancel,
             callback_group=ReentrantCallbackGroup(),
             result_timeout=float(self.get_parameter('result_timeout_s').value))
 
@@ -210,6 +217,20 @@ class CoordinatorNode(Node):
                 goal_handle.execute()
             else:
                 self._queue.append(goal_handle)
+
+    def _on_cancel(self, goal_handle) -> CancelResponse:
+        """Accept; for the running goal, stop the workers' FMU runs in progress too."""
+        if goal_handle is self._running:
+            self._cancelling = goal_handle
+            for client in self.cancel_clients:
+                if client.service_is_ready():
+                    client.call_async(Trigger.Request())  # answered or not, the goal ends
+        return CancelResponse.ACCEPT
+
+    def _cancel_requested(self) -> bool:
+        running = self._running
+        return running is not None and (running is self._cancelling
+                                        or running.is_cancel_requested)
 
     def _next_goal(self) -> None:
         """Start the next queued goal (at the end of a goal's execute callback)."""
@@ -263,11 +284,16 @@ class CoordinatorNode(Node):
         def evaluate(designs: np.ndarray) -> FullEvaluation:
             # The simplified handling model runs on the inputs of the full run at x
             # (simplified_inputs.py); the ride model needs none.
-            responses = self.pool.evaluate(
-                scenario, request.n_vars, designs,
-                return_inputs=(request.gradient_source == 'simplified' and len(designs) == 1
-                               and scenario == 'handling'),
-                integrator=request.integrator)
+            try:
+                responses = self.pool.evaluate(
+                    scenario, request.n_vars, designs,
+                    return_inputs=(request.gradient_source == 'simplified'
+                                   and len(designs) == 1 and scenario == 'handling'),
+                    integrator=request.integrator)
+            except (ValueError, ServiceCallError) as error:
+                if self._cancel_requested():
+                    raise RunCancelled(str(error)) from error
+                raise
             f = np.concatenate([np.asarray(r.f, float) for r in responses])
             g = np.concatenate([np.asarray(r.g, float).reshape(r.n_designs, r.n_constraints)
                                 for r in responses])
@@ -285,11 +311,16 @@ class CoordinatorNode(Node):
 
         def gradient(x: np.ndarray, inputs: Any
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-            response = call(self, self.gradient_client, EvaluateGradient.Request(
-                scenario=scenario, n_vars=request.n_vars, x=x.tolist(),
-                step=request.fd_step,
-                inputs=TimeHistories() if inputs is None else inputs), self.timeout_s,
-                self._stopped)
+            try:
+                response = call(self, self.gradient_client, EvaluateGradient.Request(
+                    scenario=scenario, n_vars=request.n_vars, x=x.tolist(),
+                    step=request.fd_step,
+                    inputs=TimeHistories() if inputs is None else inputs), self.timeout_s,
+                    self._stopped)
+            except ServiceCallError as error:
+                if self._cancel_requested():
+                    raise RunCancelled(str(error)) from error
+                raise
             if not response.success:
                 raise ValueError(f'gradient evaluator: {response.error}')
             dg = np.asarray(response.dg, float).reshape(response.n_constraints, request.n_vars)
@@ -359,6 +390,7 @@ class CoordinatorNode(Node):
             return Optimise.Result(success=False, message='cancelled before it started')
         self.get_logger().info(f'optimising {request.scenario} with {request.n_vars} '
                                f'variables, {request.gradient_source} gradients')
+        self.pool.revive()  # a worker that failed an earlier goal and is up again serves
         self._publish_run_config(request)
         counter = RunCounter()
         history_msgs: list[IterationRecord] = []
@@ -384,9 +416,15 @@ class CoordinatorNode(Node):
                               counter=counter, constraint_models=models,
                               constraint_gradients=gradients)
         except (ValueError, ServiceCallError) as error:
-            self.get_logger().error(f'optimisation failed: {error}')
-            goal_handle.abort()
-            message = Optimise.Result(success=False, message=str(error), history=history_msgs,
+            if self._cancel_requested():  # e.g. during the calibration
+                self.get_logger().info(f'goal cancelled ({error})')
+                goal_handle.canceled()
+                text = 'cancelled'
+            else:
+                self.get_logger().error(f'optimisation failed: {error}')
+                goal_handle.abort()
+                text = str(error)
+            message = Optimise.Result(success=False, message=text, history=history_msgs,
                                       wall_time_s=time.monotonic() - t0, **counter.as_dict())
             self.result_pub.publish(message)
             return message
@@ -411,7 +449,8 @@ class CoordinatorNode(Node):
         return message
 
     def _stopped(self) -> bool:
-        return self.stopping
+        """Stop waiting for services: the node shuts down, or the goal is cancelled."""
+        return self.stopping or self._cancel_requested()
 
     def destroy_node(self) -> None:
         """Let a running goal end, drop the queued ones, destroy the action server too.
