@@ -222,7 +222,8 @@ class FmuProcessPool:
     designs_per_process : int
         Designs a child runs before it is replaced.
 
-    The children start at once; :meth:`run` waits for them (at most
+    The children start in the background (the first one of a process waits for the
+    fork server's imports, seconds); :meth:`run` waits for them (at most
     :data:`START_TIMEOUT_S`), :meth:`wait_ready` too.
     """
 
@@ -241,7 +242,25 @@ class FmuProcessPool:
         self._state_lock = threading.Lock()
         self._running = self._cancelled = self._closed = False
         self.replaced = 0  # children replaced after a failure, a timeout or a stop
-        self._children = [self._start() for _ in range(int(processes))]
+        self._children: list[_Child] = []
+        self._start_error: BaseException | None = None
+        self._starter = threading.Thread(target=self._start_all, args=(int(processes),),
+                                         name='fmu_start', daemon=True)
+        self._starter.start()
+
+    def _start_all(self, processes: int) -> None:
+        try:
+            for _ in range(processes):
+                self._children.append(self._start())
+        except BaseException as error:  # noqa: BLE001 - raised by the first run
+            self._start_error = error
+
+    def _started(self) -> None:
+        """Wait for the background start of the children (FmuRunError if it failed)."""
+        self._starter.join()
+        if self._start_error is not None:
+            raise FmuRunError(f'the child processes of the FMU could not be started: '
+                              f'{type(self._start_error).__name__}: {self._start_error}')
 
     # ---------------------------------------------------------------- children
     def _start(self) -> _Child:
@@ -323,6 +342,7 @@ class FmuProcessPool:
         """
         deadline = time.monotonic() + timeout_s
         with self._run_lock:
+            self._started()
             while any(c.state == 'starting' for c in self._children):
                 starting = [c for c in self._children if c.state == 'starting']
                 remaining = deadline - time.monotonic()
@@ -362,6 +382,7 @@ class FmuProcessPool:
                     raise FmuRunCancelledError('the FMU model is closed')
                 self._running, self._cancelled = True, False
             try:
+                self._started()
                 return self._run(sm, x, values, inputs, stopping)
             finally:
                 with self._state_lock:
@@ -467,6 +488,7 @@ class FmuProcessPool:
         self._wake()
         locked = self._run_lock.acquire(timeout=5.0)  # a run ends within POLL_S
         try:
+            self._starter.join()
             for child in self._children:
                 self._stop(child)
             self._wake_r.close()
