@@ -96,6 +96,62 @@ def test_fmu_worker_answers_a_failing_design_with_an_error_and_keeps_serving(
     assert ok.metric_names[:2] == ['a_rms_driver_mps2', 'a_rms_passenger_mps2']
 
 
+def test_fmu_worker_fails_a_hung_design_at_its_timeout_stops_a_cancelled_one_and_serves_on(
+        ros_context, executor, fmus, tmp_path):
+    """FaultyRide hanging in a design (test_fmu_isolated.py): the request fails after
+    ``fmu_timeout_s`` (given as an int, as users write it) naming the design, the
+    simulation time and the FMU's own warning; ``~/cancel`` stops a hung run at once;
+    the worker serves the next request."""
+    import time
+
+    from rclpy.node import Node
+    from std_srvs.srv import Trigger
+    from suspension_tuning_interfaces.srv import EvaluateDesign
+    from test_fmu_isolated import BAD, GOOD, WARNING, faulty_mapping
+
+    from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
+
+    mapping = faulty_mapping(3)  # 3: hang
+    sim = FullVehicleSimNode('hung_sim', context=ros_context, parameter_overrides=[
+        *fmu_parameters(fmus['faulty'], write_mapping(tmp_path, yaml.safe_load(mapping.text))),
+        Parameter('fmu_timeout_s', value=2)])  # 2 s: a healthy design here takes ~0.05 s
+    assert sim.get_parameter('fmu_timeout_s').value == 2.0  # stored as the float it means
+    client_node = Node('hung_sim_client', context=ros_context)
+    executor.add(sim, client_node)
+    evaluate = client_node.create_client(EvaluateDesign, '/hung_sim/evaluate')
+    cancel = client_node.create_client(Trigger, '/hung_sim/cancel')
+    assert evaluate.wait_for_service(timeout_sec=10.0) and cancel.wait_for_service(10.0)
+
+    def send(designs):
+        return evaluate.call_async(EvaluateDesign.Request(
+            scenario='ride', n_vars=2, designs=np.ravel(designs).tolist()))
+
+    first = wait(send(GOOD), 60.0)  # also waits for the worker's first child process
+    assert first.success, first.error
+    start = time.monotonic()
+    timed_out = wait(send(BAD), 60.0)
+    took = time.monotonic() - start
+    assert not timed_out.success
+    assert ('design 1 (x = [0.9, 0.4]): no result within 2 s (fmu_timeout_s): the FMU hung '
+            'at t = 0.202 s') in timed_out.error
+    assert WARNING in timed_out.error
+    assert took < 2.0 + 5.0  # the issue's bound: within the timeout + 5 s
+    # A cancel while the design hangs (its timeout is 2 s away): answered at once.
+    pending = send(BAD)
+    time.sleep(0.5)  # the hang starts within ~0.1 s of the request (0.2 s of FMU time)
+    start = time.monotonic()
+    stopped = wait(cancel.call_async(Trigger.Request()), 10.0)
+    cancelled = wait(pending, 10.0)
+    assert stopped.success, stopped.message
+    assert time.monotonic() - start < 1.0  # POLL_S = 0.25 s and a kill
+    assert cancelled.error.startswith('cancelled: FMU run stopped (cancel requested): '
+                                      'design 1 (x = [0.9, 0.4])'), cancelled.error
+    assert not wait(cancel.call_async(Trigger.Request()), 10.0).success  # nothing runs
+    ok = wait(send(GOOD), 60.0)
+    assert ok.success, ok.error
+    assert ok.f == first.f
+
+
 def test_fmu_worker_wrapping_our_full_model_answers_like_the_builtin_worker(
         ros_context, executor, fmus, tmp_path):
     """A handling request with the simplified model's inputs, to a built-in worker and
