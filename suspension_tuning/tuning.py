@@ -477,7 +477,7 @@ def optimise(request: TuningRequest, full_model: FullModel,
     result.update(counter.as_dict(), scenario=request.scenario, n_vars=n,
                   gradient_source=request.gradient_source,
                   constraints=[c.as_dict() for c in request.constraints],
-                  constraint_values=constraint_values(result.g),
+                  constraint_values=constraint_values(result.g) if 'g' in result else [],
                   constraint_gradient_sources=request.constraint_gradient_sources())
     if 'g_best' in result:
         result.update(constraint_values_best=constraint_values(result.g_best))
