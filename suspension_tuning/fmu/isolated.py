@@ -173,6 +173,13 @@ def _ended(exitcode: int | None) -> str:
     return f'its process exited with code {exitcode}'
 
 
+def _when(t: float) -> str:
+    """``at t = 0.202 s (in the step from there)``, from a child's progress."""
+    if math.isnan(t):
+        return 'before its run started'
+    return f'at t = {t:.6g} s (in the step from there)'
+
+
 def _said(messages: collections.abc.Iterable[FmuMessage]) -> str:
     """`` The FMU said: ...`` of its last messages, or ''."""
     messages = list(messages)
@@ -327,8 +334,7 @@ class FmuProcessPool:
         state = child.state
         if state == 'busy':
             failures[child.index] = (f'{design_label(child.index, child.x)}: the FMU crashed '
-                                     f'at t = {child.t:.6g} s (in the step from there): '
-                                     f'{cause}.{_said(child.recent)}')
+                                     f'{_when(child.t)}: {cause}.{_said(child.recent)}')
         self._replace(child)
         return f'{cause} while loading the FMU' if state == 'starting' else None
 
@@ -409,14 +415,17 @@ class FmuProcessPool:
                 busy = [c for c in self._children if c.state == 'busy']
                 for child in busy:
                     self._replace(child)
-                stopped = ', '.join(f'{design_label(c.index, c.x)} at t = {c.t:.6g} s'
-                                    for c in busy)
+                stopped = ', '.join(f'{design_label(c.index, c.x)} '
+                                    + (f'at t = {c.t:.6g} s' if not math.isnan(c.t)
+                                       else 'before its run started') for c in busy)
                 raise FmuRunCancelledError(f'FMU run stopped ({reason})' +
                                       (f': {stopped}' if stopped else ''))
             if not failures and start_problem is None:
-                for child in self._children:
+                for child in list(self._children):
                     if child.state == 'idle' and queue:
-                        self._send(child, sm.name, queue.popleft(), x, values, inputs)
+                        index = queue.popleft()
+                        if not self._send(child, sm.name, index, x, values, inputs):
+                            queue.appendleft(index)  # its child had died idle: replaced
             busy = [c for c in self._children if c.state == 'busy']
             if not busy and (failures or start_problem or not queue):
                 break
@@ -437,9 +446,8 @@ class FmuProcessPool:
                 if child.state == 'busy' and now - child.sent > self.timeout_s:
                     failures[child.index] = (
                         f'{design_label(child.index, child.x)}: no result within '
-                        f'{self.timeout_s:g} s (fmu_timeout_s): the FMU hung at t = '
-                        f'{child.t:.6g} s (in the step from there); its process was '
-                        f'stopped.{_said(child.recent)}')
+                        f'{self.timeout_s:g} s (fmu_timeout_s): the FMU hung '
+                        f'{_when(child.t)}; its process was stopped.{_said(child.recent)}')
                     self._replace(child)
                 elif child.state == 'starting' and now - child.started > START_TIMEOUT_S:
                     start_problem = f'it did not load within {START_TIMEOUT_S:g} s'
@@ -452,17 +460,20 @@ class FmuProcessPool:
         return out
 
     def _send(self, child: _Child, scenario: str, index: int, x: np.ndarray,
-              values: list[dict], inputs: np.ndarray | None) -> None:
+              values: list[dict], inputs: np.ndarray | None) -> bool:
+        """Send design ``index`` to an idle child; False if the child had died."""
         fresh = scenario not in child.scenarios
         child.progress.value = math.nan
-        child.index, child.x, child.sent, child.state = index, x[index], time.monotonic(), 'busy'
         child.recent.clear()
         try:
             child.conn.send((scenario, index, x[index], values[index], fresh,
                              inputs if fresh else None))
-        except OSError:  # died while idle: its death is collected as a crash of the design
-            return
+        except OSError:
+            self._replace(child)
+            return False
+        child.index, child.x, child.sent, child.state = index, x[index], time.monotonic(), 'busy'
         child.scenarios.add(scenario)
+        return True
 
     def cancel(self) -> bool:
         """Stop the run in progress (its designs fail as cancelled); False if none runs."""
