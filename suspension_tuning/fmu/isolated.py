@@ -46,15 +46,9 @@ from typing import Any
 
 import numpy as np
 
+from suspension_tuning.fmu.fmi_log import MESSAGES_IN_ERROR, FmuMessage
 from suspension_tuning.fmu.mapping import FmuMapping, ScenarioMapping
-from suspension_tuning.fmu.model import (
-    MESSAGES_IN_ERROR,
-    FmuConfigError,
-    FmuMessage,
-    FmuModel,
-    FmuRunError,
-    design_label,
-)
+from suspension_tuning.fmu.model import FmuConfigError, FmuModel, FmuRunError, design_label
 
 #: Per-design wall-clock timeout by default, s: a detailed multibody FMU (Adams,
 #: CarSim) running a 30 s manoeuvre up to ten times slower than real time, and well

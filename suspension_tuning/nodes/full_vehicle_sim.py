@@ -60,8 +60,8 @@ from suspension_tuning_interfaces.srv import EvaluateDesign
 
 from suspension_tuning import evaluation, simplified_inputs, telemetry
 from suspension_tuning.fmu import FmuConfigError, MappingError, worker_model
+from suspension_tuning.fmu.fmi_log import FmuMessage
 from suspension_tuning.fmu.isolated import DEFAULT_TIMEOUT_S, FmuRunCancelledError
-from suspension_tuning.fmu.model import FmuMessage
 from suspension_tuning.nodes._parameters import ParameterError, declare_numbers
 from suspension_tuning.nodes._services import serve
 from suspension_tuning.nodes._spin import run_node
