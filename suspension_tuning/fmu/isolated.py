@@ -252,13 +252,28 @@ class FmuProcessPool:
     def _start_all(self, processes: int) -> None:
         try:
             for _ in range(processes):
-                self._children.append(self._start())
+                child = self._start()
+                with self._state_lock:
+                    if not self._closed:
+                        self._children.append(child)
+                        continue
+                self._stop(child)  # closed while it started
+                return
         except BaseException as error:  # noqa: BLE001 - raised by the first run
             self._start_error = error
 
-    def _started(self) -> None:
-        """Wait for the background start of the children (FmuRunError if it failed)."""
-        self._starter.join()
+    def _started(self, stopping: Callable[[], bool] | None = None) -> None:
+        """Wait for the background start of the children (FmuRunError if it failed).
+
+        The first start of a process waits for the fork server's imports (seconds, more
+        on a busy machine): a cancel, closing or ``stopping()`` ends the wait.
+        """
+        while self._starter.is_alive():
+            reason = self._stop_reason(stopping)
+            if reason:
+                raise FmuRunCancelledError(f'FMU run stopped ({reason}) before its child '
+                                           'process had started')
+            self._starter.join(POLL_S)
         if self._start_error is not None:
             raise FmuRunError(f'the child processes of the FMU could not be started: '
                               f'{type(self._start_error).__name__}: {self._start_error}')
@@ -344,6 +359,8 @@ class FmuProcessPool:
         with self._run_lock:
             self._started()
             while any(c.state == 'starting' for c in self._children):
+                if self._closed:
+                    raise FmuRunCancelledError('the FMU model is closed')
                 starting = [c for c in self._children if c.state == 'starting']
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
@@ -382,7 +399,7 @@ class FmuProcessPool:
                     raise FmuRunCancelledError('the FMU model is closed')
                 self._running, self._cancelled = True, False
             try:
-                self._started()
+                self._started(stopping)
                 return self._run(sm, x, values, inputs, stopping)
             finally:
                 with self._state_lock:
@@ -493,8 +510,10 @@ class FmuProcessPool:
         self._wake()
         locked = self._run_lock.acquire(timeout=5.0)  # a run ends within POLL_S
         try:
-            self._starter.join()
-            for child in self._children:
+            # Not waiting for a start under way: the starter stops what it started.
+            with self._state_lock:
+                children = list(self._children)
+            for child in children:
                 self._stop(child)
             self._wake_r.close()
             self._wake_w.close()

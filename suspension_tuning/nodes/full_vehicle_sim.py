@@ -156,8 +156,12 @@ class FullVehicleSimNode(Node):
             Node.destroy_node(self)
             raise
         self.model_pub = self.create_publisher(String, '~/model', LATCHED)
-        self.model_pub.publish(String(data=dump_yaml(
-            {'model': 'builtin'} if self.fmu is None else self.fmu.description())))
+        # For an FMU, also how its designs run (recorded in every run configuration).
+        described = {'model': 'builtin'} if self.fmu is None else {
+            **self.fmu.description(),
+            **{name: self.get_parameter(name).value
+               for name in ('fmu_isolation', 'fmu_timeout_s', 'fmu_processes')}}
+        self.model_pub.publish(String(data=dump_yaml(described)))
         self.clock_pub = self.create_publisher(Clock, '/clock', 10)
         self.state_pub = self.create_publisher(VehicleState, '/vehicle/state', RELIABLE)
         self.valve_answers: dict[int, tuple[int, int, int, int]] = {}
