@@ -15,7 +15,12 @@ iterate, or the least violating one when none was feasible, and says which; also
 physical units), the history and the full-model, simplified-model and calibration run
 counts.  The run's configuration is published on ``/optimisation/run_config`` when a
 goal starts, every iteration on ``/optimisation/progress`` and the result on
-``/optimisation/result``, so that the recorder puts one run in one bag.  The loop
+``/optimisation/result``, so that the recorder puts one run in one bag.
+
+A cancelled goal stops waiting for its service calls at once, asks every worker to
+stop the FMU run in progress (``/<worker>/cancel``), and ends with the best design of
+the iterations completed.  A worker that failed a goal serves the next one if its
+service is up again.  The loop
 itself is :func:`suspension_tuning.tuning.optimise`, shared with in-process runs.
 """
 
