@@ -218,7 +218,7 @@ class FmuProcessPool:
     timeout_s : float
         Wall-clock time one design may take, s.
     on_message : callable, optional
-        Receives each :class:`~suspension_tuning.fmu.model.FmuMessage` of the FMU, in the
+        Receives each :class:`~suspension_tuning.fmu.fmi_log.FmuMessage` of the FMU, in the
         thread that runs :meth:`run`.
     designs_per_process : int
         Designs a child runs before it is replaced.
@@ -537,7 +537,7 @@ class IsolatedFmuModel(FmuModel):
     processes : int
         Child processes, i.e. designs of one request run at the same time.
     on_message : callable, optional
-        Receives the FMU's log messages (:class:`~suspension_tuning.fmu.model.FmuMessage`).
+        Receives the FMU's log messages (:class:`~suspension_tuning.fmu.fmi_log.FmuMessage`).
     stopping : callable, optional
         Checked every :data:`POLL_S` while designs run; True stops the run
         (:class:`FmuRunCancelledError`), e.g. when the worker shuts down.

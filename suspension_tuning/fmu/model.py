@@ -17,7 +17,8 @@ applied here; :func:`~suspension_tuning.vehicle.scenarios.handling_objective`). 
 returns what :func:`suspension_tuning.evaluation.evaluate` returns.  A design whose
 run fails, stops early or gives a non-finite output raises :class:`FmuRunError`
 naming the design, the simulation time reached and the FMU's own last messages (its FMI
-logger callback, :class:`FmuMessage`; each message also goes to ``on_message``).
+logger callback, :class:`~suspension_tuning.fmu.fmi_log.FmuMessage`; each message also
+goes to ``on_message``).
 :mod:`suspension_tuning.fmu.isolated` runs the same designs in child processes that
 can be stopped.
 """
@@ -84,7 +85,7 @@ class FmuModel:
     """A checked FMU with its mapping, evaluating designs like the built-in model.
 
     Each design runs in this process; ``on_message`` (None or a callable) receives the
-    FMU's log messages (:class:`FmuMessage`) as they come.
+    FMU's log messages (:class:`~suspension_tuning.fmu.fmi_log.FmuMessage`) as they come.
 
     Parameters
     ----------
