@@ -50,6 +50,10 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
     ------
     ValueError
         No worker, or a factory for a node the graph does not have.
+    Exception
+        What a node's constructor raised (e.g. FmuConfigError for a worker's FMU), with
+        the node's name in its attribute ``node_name``; the nodes made before it are
+        destroyed.
     """
     from suspension_tuning.nodes.coordinator import CoordinatorNode
     from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
@@ -73,9 +77,17 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
     workers_set = [Parameter('sim_workers', value=[f'/{name}' for name in names])]
     graph_set = {'gradient_evaluator': workers_set, 'coordinator': workers_set}
     overrides = overrides or {}
-    return [make(context=context,
-                 parameter_overrides=[*graph_set.get(name, []), *overrides.get(name, [])])
-            for name, make in makers.items()]
+    nodes: list[Node] = []
+    for name, make in makers.items():
+        try:
+            nodes.append(make(context=context, parameter_overrides=[
+                *graph_set.get(name, []), *overrides.get(name, [])]))
+        except Exception as error:
+            error.node_name = name
+            for node in reversed(nodes):  # e.g. a worker's FMU child processes
+                node.destroy_node()
+            raise
+    return nodes
 
 
 class SpinningGraph:
@@ -132,7 +144,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument('--no-record', action='store_true', help='no recorder node')
     args = parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
     rclpy.init(args=argv)
-    graph = SpinningGraph(build_nodes(args.workers, not args.no_record))
+    from suspension_tuning.fmu import FmuConfigError, MappingError
+    from suspension_tuning.nodes._parameters import ParameterError
+    try:
+        nodes = build_nodes(args.workers, not args.no_record)
+    except (FmuConfigError, MappingError, ParameterError) as error:
+        # As the node alone says it (full_vehicle_sim's main): one line, exit code 2.
+        rclpy.try_shutdown()
+        print(f'{getattr(error, "node_name", "graph")}: not started: {error}', file=sys.stderr)
+        sys.exit(2)
+    graph = SpinningGraph(nodes)
     try:
         graph.wait()
     except KeyboardInterrupt:

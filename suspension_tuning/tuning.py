@@ -56,6 +56,14 @@ Array = NDArray[np.float64]
 
 #: Gradient sources of the Optimise action.
 GRADIENT_SOURCES = ('simplified', 'full')
+
+
+class RunCancelled(Exception):  # noqa: N818 - a stop, not an error
+    """Raised by a full model or gradient whose run was cancelled mid-iteration.
+
+    :func:`optimise` then stops as on a cancelling callback: its result holds the
+    iterations completed before (the best design among them), status 99.
+    """
 #: Scenarios that can be optimised (the mixed scenario is a closed-loop check only).
 OPTIMISATION_SCENARIOS = ('ride', 'handling')
 #: Scenarios whose full-model run can give an extra constraint.
@@ -390,7 +398,8 @@ def optimise(request: TuningRequest, full_model: FullModel,
         model (2n simplified runs each); required for gradient source 'simplified'.
     callback : callable, optional
         Called with each iteration's record and the run counter; returning True
-        stops the run (cancellation).
+        stops the run (cancellation).  A model or gradient raising
+        :class:`RunCancelled` stops it too, within an iteration.
     history : sequence of mappings, optional
         Records of an earlier run to resume from (``result.history``).
     counter : RunCounter, optional
@@ -443,27 +452,32 @@ def optimise(request: TuningRequest, full_model: FullModel,
         r['g'], float)] for r in (history or ()) if correct}
     while (ask := opt.ask()) is not None:
         kind, x = ask
-        if kind == 'evaluate':
-            f, g = terms.evaluate(x)
-            if correct:
-                evaluated[x.tobytes()] = np.r_[f, g]
-            record = opt.tell((f, g, None))
-        elif request.gradient_source == 'full':
-            def values(points: Array) -> Array:
-                return terms.stacked_values(points)
+        try:
+            if kind == 'evaluate':
+                f, g = terms.evaluate(x)
+                if correct:
+                    evaluated[x.tobytes()] = np.r_[f, g]
+                record = opt.tell((f, g, None))
+            elif request.gradient_source == 'full':
+                def values(points: Array) -> Array:
+                    return terms.stacked_values(points)
 
-            jac = central_difference(values, x, request.fd_step, lower, upper)
-            record = opt.tell((jac[0], jac[1:], None), source='full')
-        else:
-            df, dg, values = terms.simplified_gradient(x, lower, upper)
-            full = evaluated.get(x.tobytes())
-            if correct and values is not None and full is not None:
-                if correction is None:
-                    correction = SecantCorrection(full.size, n, correction_options.min_step)
-                correction.observe(x, full, values)
-                jac = correction.correct(np.vstack([df, dg]))
-                df, dg = jac[0], jac[1:]
-            record = opt.tell((df, dg, None), source='simplified')
+                jac = central_difference(values, x, request.fd_step, lower, upper)
+                record = opt.tell((jac[0], jac[1:], None), source='full')
+            else:
+                df, dg, values = terms.simplified_gradient(x, lower, upper)
+                full = evaluated.get(x.tobytes())
+                if correct and values is not None and full is not None:
+                    if correction is None:
+                        correction = SecantCorrection(full.size, n,
+                                                      correction_options.min_step)
+                    correction.observe(x, full, values)
+                    jac = correction.correct(np.vstack([df, dg]))
+                    df, dg = jac[0], jac[1:]
+                record = opt.tell((df, dg, None), source='simplified')
+        except RunCancelled:
+            opt.stop('cancelled')
+            break
         if record is not None and callback is not None and callback(record, counter):
             opt.stop('cancelled')
     result = opt.result()
@@ -476,7 +490,7 @@ def optimise(request: TuningRequest, full_model: FullModel,
     result.update(counter.as_dict(), scenario=request.scenario, n_vars=n,
                   gradient_source=request.gradient_source,
                   constraints=[c.as_dict() for c in request.constraints],
-                  constraint_values=constraint_values(result.g),
+                  constraint_values=constraint_values(result.g) if 'g' in result else [],
                   constraint_gradient_sources=request.constraint_gradient_sources())
     if 'g_best' in result:
         result.update(constraint_values_best=constraint_values(result.g_best))

@@ -99,9 +99,10 @@ def fmus(tmp_path_factory) -> dict[str, str]:
 
     ``ride_inputs`` (FMI 2.0, road under each wheel as inputs), ``own_road`` (FMI 3.0,
     a road of its own, declared units), ``failing`` (FMI 2.0, fails mid-run for some
-    designs), ``defender`` (FMI 2.0, the product's own full model behind FMI) and
-    ``half_car`` (FMI 2.0, a vehicle with names and units of its own: cm^3, one road
-    input per axle, no declared units).
+    designs), ``faulty`` (FMI 2.0, raises, returns NaN, hangs, segfaults or exits its
+    process mid-run for some designs), ``defender`` (FMI 2.0, the product's own full
+    model behind FMI) and ``half_car`` (FMI 2.0, a vehicle with names and units of its
+    own: cm^3, one road input per axle, no declared units).
     """
     from pythonfmu.builder import FmuBuilder
     from pythonfmu3.builder import FmuBuilder as Fmu3Builder
@@ -119,6 +120,8 @@ def fmus(tmp_path_factory) -> dict[str, str]:
                                               project_files=plate)),
         'failing': str(FmuBuilder.build_FMU(source('FailingRide.py'), dest=dest,
                                             project_files=plate)),
+        'faulty': str(FmuBuilder.build_FMU(source('FaultyRide.py'), dest=dest,
+                                           project_files=plate)),
         'defender': str(FmuBuilder.build_FMU(source('DefenderFmu.py'), dest=dest)),
         'half_car': str(FmuBuilder.build_FMU(source('HalfCarRide.py'), dest=dest,
                                              project_files=plate)),

@@ -55,6 +55,31 @@ def test_callback_can_cancel_between_iterations():
     assert result.status == 99  # stopped by the caller
 
 
+@pytest.mark.parametrize('calls_before', [0, 7])
+def test_a_model_run_cancelled_mid_iteration_stops_with_the_best_design_so_far(calls_before):
+    """A model raising RunCancelled (a cancelled service call) stops the loop as a
+    cancelling callback does: before any evaluation (0 calls), or inside a later
+    iteration (full gradients: 1 + 2n = 5 calls per iteration, so the 8th call falls
+    in the second iteration's gradient)."""
+    from suspension_tuning.tuning import RunCancelled
+
+    calls = []
+
+    def model(points):
+        calls.append(points)
+        if len(calls) > calls_before:
+            raise RunCancelled('cancelled while waiting')
+        return quadratic_model(points)
+
+    request = TuningRequest('ride', 2, gradient_source='full', options=OPTIONS)
+    result = optimise(request, model)
+    assert result.status == 99 and result.message == 'cancelled'
+    if calls_before:
+        assert result.nit >= 1 and 'x_best' in result
+    else:
+        assert 'nit' not in result and 'x_best' not in result and result.constraint_values == []
+
+
 def test_start_defaults_to_the_centre_of_the_design_space():
     # Eqs. 6 and 8: bounds 0.001..1, centre 0.5005.
     assert TuningRequest('handling', 4).start == pytest.approx(centre(4))

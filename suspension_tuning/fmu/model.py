@@ -16,7 +16,11 @@ the same code as the built-in model
 applied here; :func:`~suspension_tuning.vehicle.scenarios.handling_objective`).  It
 returns what :func:`suspension_tuning.evaluation.evaluate` returns.  A design whose
 run fails, stops early or gives a non-finite output raises :class:`FmuRunError`
-naming the design.
+naming the design, the simulation time reached and the FMU's own last messages (its FMI
+logger callback, :class:`~suspension_tuning.fmu.fmi_log.FmuMessage`; each message also
+goes to ``on_message``).
+:mod:`suspension_tuning.fmu.isolated` runs the same designs in child processes that
+can be stopped.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ import shutil
 import tempfile
 import time
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree
@@ -35,6 +40,7 @@ import numpy as np
 import yaml
 
 from suspension_tuning.evaluation import DesignEvaluation, metric_table
+from suspension_tuning.fmu.fmi_log import FmuLog, FmuMessage
 from suspension_tuning.fmu.mapping import CORNERS, FmuMapping, ScenarioMapping, load_mapping
 from suspension_tuning.fmu.units import Conversion, resolve
 from suspension_tuning.model_identity import with_fingerprint
@@ -66,7 +72,8 @@ STATIC_LOAD_TOLERANCE = 0.15
 #: is taken as a wrong unit (the paper's ranges span a factor 6 (volume) and 30 (dpsf):
 #: a realistic start value lies inside or near them; a unit slip is 1000).
 START_VALUE_FACTOR = 10.0
-#: FMU libraries of closed models, kept loaded (FmuModel.close).
+#: FMU libraries of closed models, kept loaded (FmuModel.close), and instances left after a
+#: fatal status (with the logger callbacks they may still call).
 _LOADED_LIBRARIES: list = []
 
 
@@ -76,6 +83,11 @@ class FmuConfigError(ValueError):
 
 class FmuRunError(RuntimeError):
     """A design whose FMU run failed, stopped early, or gave NaN or infinite outputs."""
+
+
+def design_label(index: int, x: np.ndarray) -> str:
+    """``design 1 (x = [0.9, 0.4])``: how errors name a design."""
+    return f'design {index} (x = {np.round(np.asarray(x, float), 6).tolist()})'
 
 
 def _require_fmpy():
@@ -88,6 +100,9 @@ def _require_fmpy():
 
 class FmuModel:
     """A checked FMU with its mapping, evaluating designs like the built-in model.
+
+    Each design runs in this process; ``on_message`` (None or a callable) receives the
+    FMU's log messages (:class:`~suspension_tuning.fmu.fmi_log.FmuMessage`) as they come.
 
     Parameters
     ----------
@@ -105,6 +120,8 @@ class FmuModel:
     MappingError
         The mapping file itself is bad.
     """
+
+    on_message: Callable[[FmuMessage], None] | None = None
 
     def __init__(self, fmu_path: str | Path, mapping: FmuMapping | str | Path) -> None:
         fmpy = _require_fmpy()
@@ -439,8 +456,12 @@ class FmuModel:
         return np.column_stack(cols)
 
     def _run_one(self, sm: ScenarioMapping, index: int, x: np.ndarray, values: dict,
-                 inputs: np.ndarray | None) -> np.ndarray:
-        """Outputs (n_outputs, n_steps + 1) in FMU units of one design on a fresh instance."""
+                 inputs: np.ndarray | None, progress: Any = None) -> np.ndarray:
+        """Outputs (n_outputs, n_steps + 1) in FMU units of one design on a fresh instance.
+
+        ``progress`` (optional, e.g. a ``multiprocessing.RawValue('d')``): its ``value`` is
+        set to the simulation time at the start of every step, s.
+        """
         fmi3 = self.model_description.fmiVersion == '3.0'
         names = [ref.name for ref in sm.outputs.values()]
         out_vr = [self.variables[n].valueReference for n in names]
@@ -453,9 +474,12 @@ class FmuModel:
         put = slave.setFloat64 if fmi3 else slave.setReal
         t = t0
         fatal = False
+        log = FmuLog(index, lambda: t, self.on_message)
+        if progress is not None:
+            progress.value = t0
         try:
             try:
-                slave.instantiate()
+                log.instantiate(slave, fmi3)
                 for name, value in values.items():
                     self._set(slave, name, value)
                 if fmi3:
@@ -469,6 +493,8 @@ class FmuModel:
                 samples[:, 0] = get(out_vr)
                 for k in range(n):
                     t = t0 + k * h
+                    if progress is not None:
+                        progress.value = t
                     if inputs is not None:
                         put(in_vr, inputs[k].tolist())
                     status = slave.doStep(currentCommunicationPoint=t, communicationStepSize=h)
@@ -485,16 +511,26 @@ class FmuModel:
                 raise
             finally:
                 # After a fatal status FMI allows no further call on the instance (not
-                # even freeing it): it is left as it is.  Its library stays loaded.
-                if not fatal and getattr(slave, 'component', None) is not None:
+                # even freeing it): it is left as it is, with the logger it may still
+                # call.  Its library stays loaded.
+                if fatal:
+                    _LOADED_LIBRARIES.append((slave, log))
+                elif getattr(slave, 'component', None) is not None:
                     try:
                         slave.freeInstance()
                     except Exception:  # noqa: BLE001,S110 - a failed instance may not free
                         pass
         except Exception as error:  # noqa: BLE001 - every FMU failure names the design
-            raise FmuRunError(f'design {index} (x = {np.round(x, 6).tolist()}): the FMU '
-                              f'failed at t = {t:.6g} s: {error}') from error
+            said = log.summary()
+            cause = f'{str(error).rstrip(".")}.{said}' if said else str(error)
+            raise FmuRunError(f'{design_label(index, x)}: the FMU failed at t = {t:.6g} s: '
+                              f'{cause}') from error
         return samples
+
+    def _run_designs(self, sm: ScenarioMapping, x: np.ndarray, values: list[dict],
+                     inputs: np.ndarray | None) -> np.ndarray:
+        """Outputs (m, n_outputs, n_steps + 1) in FMU units of each design, in order."""
+        return np.stack([self._run_one(sm, i, x[i], values[i], inputs) for i in range(len(x))])
 
     def evaluate(self, scenario: str, designs: np.ndarray, controllers: Any = None,
                  **_: Any) -> DesignEvaluation:
@@ -522,7 +558,7 @@ class FmuModel:
         t_rel = sm.step_size_s * np.arange(sm.n_steps + 1)
         inputs = self._road_inputs(sm, t_rel) if sm.road is not None else None
         start = time.perf_counter()
-        runs = np.stack([self._run_one(sm, i, x[i], values[i], inputs) for i in range(len(x))])
+        runs = self._run_designs(sm, x, values, inputs)
         wall = time.perf_counter() - start
         conv = self.conversions[scenario]
         # Each channel contiguous per design: reductions over a strided view sum in an
@@ -601,18 +637,30 @@ class FmuModel:
 
 
 MODELS = ('builtin', 'fmu')
+#: Where a worker runs its FMU: in child processes that can be stopped, or in its own.
+ISOLATIONS = ('process', 'none')
 
 
-def worker_model(model: str, fmu_path: str = '', fmu_mapping: str = '') -> FmuModel | None:
+def worker_model(model: str, fmu_path: str = '', fmu_mapping: str = '',
+                 isolation: str = 'process', **options: Any) -> FmuModel | None:
     """The full model a simulation worker runs: None (built-in) or an FmuModel.
 
-    The three settings must agree, so that a worker never starts half-configured.
+    The settings must agree, so that a worker never starts half-configured.
+
+    Parameters
+    ----------
+    model, fmu_path, fmu_mapping : str
+        The worker's parameters of those names.
+    isolation : str
+        'process' (each design in a child process that can be stopped:
+        :class:`~suspension_tuning.fmu.isolated.IsolatedFmuModel`, which takes
+        ``options``) or 'none' (in this process; ``options`` may give ``on_message``).
 
     Raises
     ------
     FmuConfigError
-        An unknown model, 'fmu' without fmu_path or fmu_mapping, 'builtin' with either
-        set, or an FMU and mapping that do not fit (see :class:`FmuModel`).
+        An unknown model or isolation, 'fmu' without fmu_path or fmu_mapping, 'builtin'
+        with either set, or an FMU and mapping that do not fit (see :class:`FmuModel`).
     MappingError
         A bad mapping file.
     """
@@ -630,4 +678,12 @@ def worker_model(model: str, fmu_path: str = '', fmu_mapping: str = '') -> FmuMo
     if missing:
         raise FmuConfigError(f'model fmu needs {" and ".join(missing)} (-p fmu_path:=<file.fmu> '
                              '-p fmu_mapping:=<mapping.yaml>, docs/fmu.md)')
-    return FmuModel(fmu_path, fmu_mapping)
+    if isolation not in ISOLATIONS:
+        raise FmuConfigError(f'fmu_isolation must be one of {", ".join(ISOLATIONS)}, got '
+                             f'{isolation!r}')
+    if isolation == 'process':
+        from suspension_tuning.fmu.isolated import IsolatedFmuModel
+        return IsolatedFmuModel(fmu_path, fmu_mapping, **options)
+    fmu = FmuModel(fmu_path, fmu_mapping)
+    fmu.on_message = options.get('on_message')
+    return fmu

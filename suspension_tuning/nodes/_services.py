@@ -93,7 +93,8 @@ def call_many(node: Node, calls: Sequence[tuple[Any, Any]], timeout_s: float,
     wait_for_service_s : float
         Time to wait for a service to appear, s.
     stopping : callable
-        True when the caller's node is shutting down: stop waiting.
+        True when the caller's node is shutting down or its goal is cancelled: stop
+        waiting.
 
     Returns
     -------
@@ -166,7 +167,8 @@ class SimulationPool:
     worker has its own name (``/<worker>/evaluate``).  A batch is split into
     contiguous chunks, one per live worker, sent concurrently; a chunk whose worker
     fails (timeout, vanished) is sent again to another live worker, and the failed
-    worker is not used again.  When no worker is left, :class:`ServiceCallError` says so.
+    worker is not used again until :meth:`revive` finds its service up.  When no
+    worker is left, :class:`ServiceCallError` says so.
     The pool keeps each worker's latched model description; :meth:`check_models` pins
     the one fingerprint of the live workers (or refuses a mix), and every answer after
     it must carry that fingerprint.
@@ -241,6 +243,11 @@ class SimulationPool:
         self.fingerprint = check_same({w: str(self.models[w].get('fingerprint', 'none'))
                                        for w in self.alive})
         return self.fingerprint
+
+    def revive(self) -> None:
+        """Use again the failed workers whose service is up (e.g. restarted) now."""
+        self.alive = [name for name, client in self.clients.items()
+                      if name in self.alive or client.service_is_ready()]
 
     def evaluate(self, scenario: str, n_vars: int, designs: np.ndarray,
                  return_inputs: bool = False, publish_telemetry: bool = False,

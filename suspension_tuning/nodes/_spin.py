@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -87,9 +88,19 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None) -> No
         is spun by :func:`executor_for` the node.
     args : list of str, optional
         Command-line arguments (``--ros-args ...``); default ``sys.argv``.
+
+    A parameter value the node cannot use (:class:`~suspension_tuning.nodes._parameters.
+    ParameterError`) ends the process with its one-line message and exit code 2.
     """
+    from suspension_tuning.nodes._parameters import ParameterError
+
     rclpy.init(args=args)
-    node = make_node()
+    try:
+        node = make_node()
+    except ParameterError as error:
+        rclpy.try_shutdown()
+        print(f'not started: {error}', file=sys.stderr)
+        sys.exit(2)
     executor = executor_for(node)
     executor.add_node(node)
     try:

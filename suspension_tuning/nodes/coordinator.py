@@ -18,7 +18,12 @@ goal starts, every iteration on ``/optimisation/progress`` and the result on
 ``/optimisation/result``, so that the recorder puts one run in one bag.  A goal with
 gradient source 'evaluate' is one full-model run of its x0 instead, in any full-model
 scenario ('mixed' included, where the valves switch), published the same way: a
-recorded run of a design.  The loop
+recorded run of a design.
+
+A cancelled goal stops waiting for its service calls at once, asks every worker to
+stop the FMU run in progress (``/<worker>/cancel``), and ends with the best design of
+the iterations completed.  A worker that failed a goal serves the next one if its
+service is up again.  The loop
 itself is :func:`suspension_tuning.tuning.optimise`, shared with in-process runs.
 """
 
@@ -37,11 +42,13 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
+from std_srvs.srv import Trigger
 from suspension_tuning_interfaces.action import Optimise
 from suspension_tuning_interfaces.msg import CalibrationProgress, IterationRecord, TimeHistories
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning.evaluation import scenarios as evaluation_scenarios
+from suspension_tuning.nodes._parameters import declare_numbers
 from suspension_tuning.nodes._services import ServiceCallError, SimulationPool, call
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.correction import load_correction_options
@@ -51,6 +58,7 @@ from suspension_tuning.paths import config_dir, dump_yaml, read_yaml
 from suspension_tuning.reported_design import design_success, reported_design, result_message
 from suspension_tuning.tuning import (
     FullEvaluation,
+    RunCancelled,
     RunCounter,
     TuningRequest,
     centre,
@@ -170,9 +178,8 @@ class CoordinatorNode(Node):
         super().__init__('coordinator', **kwargs)
         self.declare_parameter('sim_workers', ['/full_vehicle_sim'])
         self.declare_parameter('gradient_node', '/gradient_evaluator')
-        self.declare_parameter('call_timeout_s', 600.0)
-        self.declare_parameter('calibration_samples', 16)
-        self.declare_parameter('fd_step', 0.025)
+        declare_numbers(self, {'call_timeout_s': 600.0, 'calibration_samples': 16,
+                               'fd_step': 0.025})
         self.declare_parameter('optimiser_config', '')
         self.declare_parameter('optimiser_section', 'vehicle')
         # One more full run at the reported design, publishing its telemetry for the bag; a
@@ -181,12 +188,17 @@ class CoordinatorNode(Node):
         # Seconds a goal's result is kept for late result requests after the goal ends
         # (rcl's default 900 s).  Every status message carries every goal kept, and an
         # action client converts all of them each time (config/graph.yaml).
-        self.declare_parameter('result_timeout_s', 10.0)
+        declare_numbers(self, {'result_timeout_s': 10.0})
         self.timeout_s = float(self.get_parameter('call_timeout_s').value)
         self.stopping = False  # set by destroy_node: a running goal stops waiting
         clients = ReentrantCallbackGroup()
         self.pool = SimulationPool(self, list(self.get_parameter('sim_workers').value),
                                    self.timeout_s, clients, self._stopped)
+        # A cancelled goal stops the workers' FMU runs in progress (~/cancel).
+        self.cancel_clients = [self.create_client(Trigger, f'{str(w).rstrip("/")}/cancel',
+                                                  callback_group=clients)
+                               for w in self.get_parameter('sim_workers').value]
+        self._cancelling: Any = None  # the goal handle whose cancel was accepted
         gradient_node = str(self.get_parameter('gradient_node').value).rstrip('/')
         self.gradient_client = self.create_client(EvaluateGradient, f'{gradient_node}/gradient',
                                                   callback_group=clients)
@@ -216,7 +228,7 @@ class CoordinatorNode(Node):
             self, Optimise, '~/optimise', execute_callback=self._execute,
             goal_callback=lambda _: GoalResponse.ACCEPT,
             handle_accepted_callback=self._on_accepted,
-            cancel_callback=lambda _: CancelResponse.ACCEPT,
+            cancel_callback=self._on_cancel,
             callback_group=ReentrantCallbackGroup(),
             result_timeout=float(self.get_parameter('result_timeout_s').value))
 
@@ -228,6 +240,20 @@ class CoordinatorNode(Node):
                 goal_handle.execute()
             else:
                 self._queue.append(goal_handle)
+
+    def _on_cancel(self, goal_handle) -> CancelResponse:
+        """Accept; for the running goal, stop the workers' FMU runs in progress too."""
+        if goal_handle is self._running:
+            self._cancelling = goal_handle
+            for client in self.cancel_clients:
+                if client.service_is_ready():
+                    client.call_async(Trigger.Request())  # answered or not, the goal ends
+        return CancelResponse.ACCEPT
+
+    def _cancel_requested(self) -> bool:
+        running = self._running
+        return running is not None and (running is self._cancelling
+                                        or running.is_cancel_requested)
 
     def _next_goal(self) -> None:
         """Start the next queued goal (at the end of a goal's execute callback)."""
@@ -282,11 +308,16 @@ class CoordinatorNode(Node):
         def evaluate(designs: np.ndarray) -> FullEvaluation:
             # The simplified handling model runs on the inputs of the full run at x
             # (simplified_inputs.py); the ride model needs none.
-            responses = self.pool.evaluate(
-                scenario, request.n_vars, designs,
-                return_inputs=(request.gradient_source == 'simplified' and len(designs) == 1
-                               and scenario == 'handling'),
-                integrator=request.integrator, road=request.road)
+            try:
+                responses = self.pool.evaluate(
+                    scenario, request.n_vars, designs,
+                    return_inputs=(request.gradient_source == 'simplified'
+                                   and len(designs) == 1 and scenario == 'handling'),
+                    integrator=request.integrator, road=request.road)
+            except (ValueError, ServiceCallError) as error:
+                if self._cancel_requested():
+                    raise RunCancelled(str(error)) from error
+                raise
             f = np.concatenate([np.asarray(r.f, float) for r in responses])
             g = np.concatenate([np.asarray(r.g, float).reshape(r.n_designs, r.n_constraints)
                                 for r in responses])
@@ -304,11 +335,16 @@ class CoordinatorNode(Node):
 
         def gradient(x: np.ndarray, inputs: Any
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-            response = call(self, self.gradient_client, EvaluateGradient.Request(
-                scenario=scenario, n_vars=request.n_vars, x=x.tolist(),
-                step=request.fd_step, road=request.road,
-                inputs=TimeHistories() if inputs is None else inputs), self.timeout_s,
-                self._stopped)
+            try:
+                response = call(self, self.gradient_client, EvaluateGradient.Request(
+                    scenario=scenario, n_vars=request.n_vars, x=x.tolist(),
+                    step=request.fd_step, road=request.road,
+                    inputs=TimeHistories() if inputs is None else inputs), self.timeout_s,
+                    self._stopped)
+            except ServiceCallError as error:
+                if self._cancel_requested():
+                    raise RunCancelled(str(error)) from error
+                raise
             if not response.success:
                 raise ValueError(f'gradient evaluator: {response.error}')
             dg = np.asarray(response.dg, float).reshape(response.n_constraints, request.n_vars)
@@ -466,6 +502,7 @@ class CoordinatorNode(Node):
         if goal_handle.is_cancel_requested:  # cancelled while it waited for an earlier goal
             goal_handle.canceled()
             return Optimise.Result(success=False, message='cancelled before it started')
+        self.pool.revive()  # a worker that failed an earlier goal and is up again serves
         refusal = None
         try:
             fingerprint = self.pool.check_models()
@@ -507,9 +544,15 @@ class CoordinatorNode(Node):
                               counter=counter, constraint_models=models,
                               constraint_gradients=gradients)
         except (ValueError, ServiceCallError) as error:
-            self.get_logger().error(f'optimisation failed: {error}')
-            goal_handle.abort()
-            message = Optimise.Result(success=False, message=str(error), history=history_msgs,
+            if self._cancel_requested():  # e.g. during the calibration
+                self.get_logger().info(f'goal cancelled ({error})')
+                goal_handle.canceled()
+                text = 'cancelled'
+            else:
+                self.get_logger().error(f'optimisation failed: {error}')
+                goal_handle.abort()
+                text = str(error)
+            message = Optimise.Result(success=False, message=text, history=history_msgs,
                                       wall_time_s=time.monotonic() - t0,
                                       model_fingerprint=fingerprint, **counter.as_dict())
             self.result_pub.publish(message)
@@ -537,7 +580,8 @@ class CoordinatorNode(Node):
         return message
 
     def _stopped(self) -> bool:
-        return self.stopping
+        """Stop waiting for services: the node shuts down, or the goal is cancelled."""
+        return self.stopping or self._cancel_requested()
 
     def destroy_node(self) -> None:
         """Let a running goal end, drop the queued ones, destroy the action server too.

@@ -39,6 +39,14 @@ GUID or instantiation token and the mapping) with its fingerprint
 start-up log names in one line; the coordinator records it in the run configuration
 and refuses to mix workers whose fingerprints differ.  An FMU worker publishes no
 telemetry.
+
+An FMU runs each design in a child process (``fmu_isolation`` 'process', the default;
+``fmu_processes`` of them, :mod:`suspension_tuning.fmu.isolated`): a crash, an exit, a
+hang longer than ``fmu_timeout_s`` (s) or NaN outputs fail that design's request with
+an error naming the design, the simulation time reached and the cause, and the worker
+serves on.  The FMU's own log messages go to the worker's log.  Service ``~/cancel``
+(std_srvs/Trigger) stops the FMU run in progress (the coordinator calls it when its
+goal is cancelled); its request then fails as cancelled.
 """
 
 from __future__ import annotations
@@ -54,12 +62,16 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
+from std_srvs.srv import Trigger
 from suspension_tuning_interfaces.msg import TimeHistories, ValveState, VehicleState
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
 from suspension_tuning import evaluation, simplified_inputs, telemetry
 from suspension_tuning.fmu import FmuConfigError, MappingError, worker_model
+from suspension_tuning.fmu.fmi_log import FmuMessage
+from suspension_tuning.fmu.isolated import DEFAULT_TIMEOUT_S, FmuRunCancelledError
 from suspension_tuning.model_identity import builtin_description, summary_line
+from suspension_tuning.nodes._parameters import ParameterError, declare_numbers
 from suspension_tuning.nodes._services import serve
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.paths import dump_yaml
@@ -133,21 +145,26 @@ class FullVehicleSimNode(Node):
 
     def __init__(self, name: str = 'full_vehicle_sim', **kwargs) -> None:
         super().__init__(name, **kwargs)
-        self.declare_parameter('telemetry_decimation', 2)
         self.declare_parameter('valve_controller', 'ros')
-        self.declare_parameter('closed_loop_timeout_s', 5.0)
         self.declare_parameter('model', 'builtin')
         self.declare_parameter('fmu_path', '')
         self.declare_parameter('fmu_mapping', '')
         # FMU start-up check with one run (auto: when the FMU declares no unit for a
         # mapped variable; always; never), docs/fmu.md
         self.declare_parameter('plausibility_check', 'auto')
+        self.declare_parameter('fmu_isolation', 'process')
         # full-model integrator when a request names none (config/vehicle.yaml default)
         self.declare_parameter('integrator', load_vehicle_params().integrator.method)
         try:  # before anything else: a bad FMU set-up leaves nothing half-started
-            self.fmu = worker_model(*(str(self.get_parameter(name).value)
-                                      for name in ('model', 'fmu_path', 'fmu_mapping')))
-        except (FmuConfigError, MappingError):
+            declare_numbers(self, {'telemetry_decimation': 2, 'closed_loop_timeout_s': 5.0,
+                                   'fmu_timeout_s': DEFAULT_TIMEOUT_S, 'fmu_processes': 1})
+            param = self.get_parameter
+            self.fmu = worker_model(
+                *(str(param(name).value) for name in ('model', 'fmu_path', 'fmu_mapping')),
+                isolation=str(param('fmu_isolation').value),
+                timeout_s=param('fmu_timeout_s').value, processes=param('fmu_processes').value,
+                on_message=self._on_fmu_message, stopping=lambda: not self.context.ok())
+        except (FmuConfigError, MappingError, ParameterError):
             Node.destroy_node(self)
             raise
         self.model_description = (
@@ -158,6 +175,11 @@ class FullVehicleSimNode(Node):
         if self.fmu is not None:
             self._check_fmu_plausibility()
         self.model_pub = self.create_publisher(String, '~/model', LATCHED)
+        # For an FMU, also how its designs run (recorded in every run configuration).
+        if self.fmu is not None:
+            self.model_description.update(
+                {name: self.get_parameter(name).value
+                 for name in ('fmu_isolation', 'fmu_timeout_s', 'fmu_processes')})
         self.model_pub.publish(String(data=dump_yaml(self.model_description)))
         self.clock_pub = self.create_publisher(Clock, '/clock', 10)
         self.state_pub = self.create_publisher(VehicleState, '/vehicle/state', RELIABLE)
@@ -167,6 +189,9 @@ class FullVehicleSimNode(Node):
                                  RELIABLE, callback_group=MutuallyExclusiveCallbackGroup())
         self.evaluate_service = serve(self, EvaluateDesign, '~/evaluate', self._on_evaluate,
                                       MutuallyExclusiveCallbackGroup())
+        # Its own group: taken while an evaluate request runs.
+        self.create_service(Trigger, '~/cancel', self._on_cancel,
+                            callback_group=MutuallyExclusiveCallbackGroup())
         self.pub = {name: self.create_publisher(kind, f'~/telemetry/{name}', TELEMETRY)
                     for name, kind in telemetry.TOPICS.items()}
         self.runs = 0
@@ -222,6 +247,11 @@ class FullVehicleSimNode(Node):
             response.error = str(error)
             self.get_logger().warning(f'bad evaluate request: {error}')
             return response
+        except FmuRunCancelledError as error:
+            response.success = False
+            response.error = f'cancelled: {error}'
+            self.get_logger().info(response.error)
+            return response
         except Exception as error:  # noqa: BLE001 - a failed run must not kill the worker
             response.success = False
             response.error = f'simulation failed: {type(error).__name__}: {error}'
@@ -255,6 +285,27 @@ class FullVehicleSimNode(Node):
         timeout = float(self.get_parameter('closed_loop_timeout_s').value)
         return [TopicValveController(self, timeout)]
 
+    def _on_cancel(self, _request: Trigger.Request,
+                   response: Trigger.Response) -> Trigger.Response:
+        if self.fmu is None or not hasattr(self.fmu, 'cancel'):
+            response.success = False
+            response.message = ('this worker runs its model in its own process '
+                                f'(model {self.get_parameter("model").value}, fmu_isolation '
+                                f'{self.get_parameter("fmu_isolation").value}): a run in '
+                                'progress cannot be stopped')
+            return response
+        response.success = self.fmu.cancel()
+        response.message = ('the FMU run in progress was stopped' if response.success
+                            else 'no FMU run in progress')
+        return response
+
+    def _on_fmu_message(self, message: FmuMessage) -> None:
+        """An FMU log message into the worker's log, at its FMI status's level."""
+        logger = self.get_logger()
+        log = (logger.info if message.status == 0 else logger.warning if message.status < 3
+               else logger.error)
+        log(f'FMU, design {message.design}, t = {message.time_s:.6g} s: {message}')
+
     def _on_valve_state(self, msg: ValveState) -> None:
         with self.valve_news:
             self.valve_answers[int(msg.step)] = (msg.front_spring, msg.front_damping,
@@ -279,7 +330,7 @@ def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning full_vehicle_sim``."""
     try:
         run_node(FullVehicleSimNode, args)
-    except (FmuConfigError, MappingError) as error:
+    except (FmuConfigError, MappingError) as error:  # ParameterError: run_node
         import rclpy
         rclpy.try_shutdown()
         print(f'full_vehicle_sim: not started: {error}', file=sys.stderr)

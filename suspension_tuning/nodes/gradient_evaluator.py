@@ -38,6 +38,7 @@ from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning import simplified_inputs
 from suspension_tuning.model_identity import ModelMismatchError
+from suspension_tuning.nodes._parameters import declare_numbers
 from suspension_tuning.nodes._services import ServiceCallError, SimulationPool, serve
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.scaling import Scaling, scaling_key
@@ -67,11 +68,10 @@ class GradientEvaluatorNode(Node):
         super().__init__('gradient_evaluator', **kwargs)
         self.declare_parameter('sim_workers', ['/full_vehicle_sim'])
         self.declare_parameter('calibration_dir', '')
-        self.declare_parameter('default_samples', 16)
-        self.declare_parameter('default_step', 0.025)
-        self.declare_parameter('call_timeout_s', 600.0)
-        # Designs per progress step of a calibration (each step one batch to the workers).
-        self.declare_parameter('calibration_chunk', 6)
+        # calibration_chunk: designs per progress step of a calibration (each step one
+        # batch to the workers).
+        declare_numbers(self, {'default_samples': 16, 'default_step': 0.025,
+                               'call_timeout_s': 600.0, 'calibration_chunk': 6})
         directory = str(self.get_parameter('calibration_dir').value)
         self.calibration_dir = Path(directory or Path.home() / '.cache' / 'suspension_tuning'
                                     / 'calibration')
@@ -129,6 +129,7 @@ class GradientEvaluatorNode(Node):
                     self.get_logger().warning(f'stale calibration {path}: {error}')
             if scaling is None:  # the designs are sampled only now (~7 ms)
                 x, _, _ = calibration_designs(n_vars, n_samples, seed)
+                self.pool.revive()  # a failed worker that is up again serves again
                 scaling = self._calibrate_remote(scenario, n_vars, x, key, request.road)
                 response.n_full_runs = n_samples
                 path.parent.mkdir(parents=True, exist_ok=True)

@@ -43,6 +43,7 @@ from suspension_tuning.bag.definitions import (
 )
 from suspension_tuning.bag.recorder import RecordingSession
 from suspension_tuning.bag.writer import qos_profile_dict
+from suspension_tuning.nodes._parameters import declare_numbers
 from suspension_tuning.nodes._spin import run_node
 
 #: Depth of the recorder's subscriptions: deep enough that a burst of telemetry (a 20 s
@@ -108,11 +109,9 @@ class RecorderNode(Node):
         self.declare_parameter('per_run', True)
         self.declare_parameter('topics', [''], string_array)
         self.declare_parameter('exclude_regex', '')
-        self.declare_parameter('discovery_period_s', 0.5)
-        self.declare_parameter('chunk_size_bytes', 512 * 1024)
-        self.declare_parameter('max_chunk_interval_s', 1.0)
-        self.declare_parameter('pre_run_s', 1.0)
-        self.declare_parameter('post_run_s', 3.0)
+        declare_numbers(self, {'discovery_period_s': 0.5, 'chunk_size_bytes': 512 * 1024,
+                               'max_chunk_interval_s': 1.0, 'pre_run_s': 1.0,
+                               'post_run_s': 3.0})
         param = self.get_parameter
         self.only = {t for t in param('topics').value if t}
         pattern = param('exclude_regex').value

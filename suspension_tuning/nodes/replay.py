@@ -32,6 +32,7 @@ from rosgraph_msgs.msg import Clock
 
 from suspension_tuning.bag.definitions import DefinitionNotFoundError, message_class
 from suspension_tuning.bag.reader import BagContents, read_messages
+from suspension_tuning.nodes._parameters import declare_numbers
 from suspension_tuning.nodes._spin import spin_until_shutdown
 
 #: Depth used when the bag records no offered QoS (rosbag2's Rosbag2QoS default, keep
@@ -70,11 +71,11 @@ class ReplayNode(Node):
         super().__init__('replay', **kwargs)
         string_array = ParameterDescriptor(type=ParameterType.PARAMETER_STRING_ARRAY)
         self.declare_parameter('bag', '')
-        self.declare_parameter('rate', 1.0)
+        declare_numbers(self, {'rate': 1.0})
         self.declare_parameter('topics', [''], string_array)
         self.declare_parameter('loop', False)
         self.declare_parameter('publish_clock', False)
-        self.declare_parameter('start_delay_s', 0.5)
+        declare_numbers(self, {'start_delay_s': 0.5})
         self.done = threading.Event()
         self.published = 0
         self._thread: threading.Thread | None = None

@@ -19,6 +19,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from suspension_tuning_interfaces.msg import ValveState, VehicleState
 
+from suspension_tuning.nodes._parameters import declare_numbers
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.vehicle.valve_logic import ValveController, ValveControllerParams
 
@@ -42,8 +43,8 @@ class ValveControllerNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__('valve_controller', **kwargs)
         defaults = asdict(ValveControllerParams())
-        for field in fields(ValveControllerParams):
-            self.declare_parameter(field.name, float(defaults[field.name]))
+        declare_numbers(self, {field.name: float(defaults[field.name])
+                               for field in fields(ValveControllerParams)})
         params = ValveControllerParams.from_dict(
             {f.name: self.get_parameter(f.name).value for f in fields(ValveControllerParams)})
         self.controller = ValveController(params)
