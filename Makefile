@@ -44,6 +44,12 @@ $(STAMPS)/package: $(STAMPS)/interfaces setup.py setup.cfg package.xml resource/
 	$(PY) scripts/install_ament_files.py $(VENV)
 	@touch $@
 
+# The method study's extra (requirements-study.txt: the peer optimisers it compares with
+# the paper's method); the product does not need it, so `make setup` leaves it out.
+$(STAMPS)/study-extra: requirements-study.txt $(STAMPS)/requirements
+	$(PY) -m pip install -q -r requirements-study.txt $(PIP_QUIET)
+	@touch $@
+
 # Foxglove's own decoding libraries (pinned in tools/foxglove/package-lock.json), installed
 # into tools/foxglove/node_modules: the tests decode recorded bags with them.  Without
 # npm on the machine those tests skip and say why.
@@ -61,17 +67,17 @@ lint: setup
 
 # The example project runs from its own folder, against the installed package and
 # the testing kit's pytest plugin, as a user's project would.
-test: lint
+test: lint $(STAMPS)/study-extra
 	$(PY) -m pytest test
 	cd examples/custom_valve_controller && $(abspath $(PY)) -m pytest
 
 demo: setup
 	$(PY) -m suspension_tuning.demo
 
-study: setup
-	$(PY) -m suspension_tuning.study --out out/study
+study: setup $(STAMPS)/study-extra
+	$(PY) -m suspension_tuning.study --out out/study --docs-dir docs/img
 
-bench: setup
+bench: setup $(STAMPS)/study-extra
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b; done
 
 # bags/sample: the ride run of make demo, recorded again (after a change of the model,

@@ -1,5 +1,9 @@
 """Does the simplified-gradient approach pay off? 4-variable ride from 6 starts (section 2).
 
+Against Dynamic-Q with full-model gradients and against the optimisers an engineer would
+pick instead (the peers: COBYLA, COBYQA, NOMAD 4, Optuna TPE, SLSQP), on the fixed-step
+and on the noisy variable-step full model.
+
 What it runs, on the fixed-step full model and then on the noisy variable-step one
 (Dormand-Prince 5(4) at Adams' default error 1e-3, config/vehicle.yaml), each from the
 same 6 starts of the 4-variable ride (eq. 9 with the eq. 11 tyre-hop constraints):
@@ -7,15 +11,23 @@ same 6 starts of the 4-variable ride (eq. 9 with the eq. 11 tyre-hop constraints
 points ``0.001 + 0.999 * scipy.stats.qmc.LatinHypercube(d=4, seed=7).random(4)``:
 
 * ours: Dynamic-Q with eq. 25-scaled simplified-model gradients and the first-order
-  correction (``study.run_dynamic_q(..., 'simplified', ...)``), after one calibration
+  correction (``common.run_dynamic_q(..., 'simplified', ...)``), after one calibration
   of 16 full-model samples (``optim.simplified_gradient.calibrate``) on the same
   integrator as the runs, done once per model and shared by the starts;
-* Dynamic-Q with full-model central differences (``study.run_dynamic_q(..., 'full')``);
+* Dynamic-Q with full-model central differences (``common.run_dynamic_q(..., 'full')``);
 * SciPy SLSQP with its default 2-point forward differences (step 1.49e-8).  On the
   noisy model also with More & Wild's noise-optimal step
-  (``study.noise_optimal_fd_step``, whose sweep is printed, not counted), and the
+  (``method_study.noise_optimal_fd_step``, whose sweep is printed, not counted), and the
   better of the two variants (fewer median full runs to solve, then more starts
-  solved) is the one compared (``noisy_best_slsqp_variant``).
+  solved) is the one compared (``noisy_best_slsqp_variant``).  Each SLSQP run may
+  spend 300 full runs.
+* the peers (``suspension_tuning.studies.peers``): COBYLA and COBYQA (SciPy, initial
+  trust radius 0.3 = Dynamic-Q's first move limit), NOMAD 4's MADS (PyNomadBBO, the
+  constraints as progressive barrier) and Optuna's TPE sampler with the constraints
+  (seed 0, the start enqueued as its first trial), each with a budget of 300 full runs
+  from each start.  A peer's run stops at its first solved reported design (all its
+  figure needs; ``make study`` runs the whole budget).  They need the study extra
+  (requirements-study.txt), which this script installs on first use.
 
 Definitions (``suspension_tuning.studies.method_benchmark``):
 
@@ -45,6 +57,13 @@ Definitions (``suspension_tuning.studies.method_benchmark``):
   ours plus the 16 calibration runs.  A ratio whose numerator is not reached (the
   other method solves half of the starts or fewer) prints ``inf``; ours not reached
   prints 0.  ``optimum_gap_pct`` is our largest gap over the 6 starts.
+* **Peers**: ``peer_best_full_runs_ride4``: for each peer (the four above and the SLSQP
+  variants, full runs to solve beyond 300 counting as not reached) the median over the
+  6 starts of its full runs to solve (``inf`` where not reached); the figure is the
+  smallest of those medians (``peer_best_ride4`` names the peer).
+  ``full_runs_ratio_vs_best_peer``: that figure over our median full runs to solve;
+  ``..._with_calibration``: over ours plus the 16 calibration runs.  ``_noisy``: the
+  same on the variable-step model.  Goal: >= 5 without calibration, >= 2 with it.
 
 Prints ``name: value`` lines: per start, ours' gap, largest violation, full runs to solve
 and total full runs; then ``ride4_starts_within_1pct`` (target 6),
@@ -53,23 +72,32 @@ and total full runs; then ``ride4_starts_within_1pct`` (target 6),
 ``ride4_max_final_violation`` (<= 0.005); the same with suffix ``_noisy`` (targets:
 median gap <= 1 %, max gap <= 2 %), plus ``ride4_max_final_violation_noisy_fixed_step``;
 the ratios and ``optimum_gap_pct`` (``..._noisy``: the noisy model's), and the wall time.
-About 12 min on 2 cores (717 s measured, the machine shared part of the time; a full
-run takes ~0.1 s, and SLSQP's default-step runs on the fixed-step model, up to ~1,000
-full runs from a start, take half of it).
+Wall time: 62 min measured (3,738 s) on 2 cores shared with other jobs (load average 5-9),
+of which 24 min CPU time of its one process: about 25 min on an otherwise idle machine
+with one process.  A full run takes ~0.06 s (fixed step) and ~0.1 s (variable step)
+idle; NOMAD's 300-run budgets (with its quadratic models) and Optuna's, which solve
+late or never, take most of the peers' share.
 
-Run: .venv/bin/python benchmarks/bench_method.py
+The peers' runs go to ``--jobs`` worker processes (default: 2 when the machine is
+otherwise idle, 1-minute load average below 0.5, else 1; the figures do not depend on it).
+
+Run: .venv/bin/python benchmarks/bench_method.py [--jobs N]
 """
 
 from __future__ import annotations
 
+import argparse
 import math
+import os
 import time
 from typing import Any
 
 import numpy as np
 
 from suspension_tuning.studies import method_benchmark as mb
-from suspension_tuning.study import SLSQP_EPS, noise_optimal_fd_step
+from suspension_tuning.studies.common import SLSQP_EPS
+from suspension_tuning.studies.method_study import noise_optimal_fd_step
+from suspension_tuning.studies.peers import PEERS, install_study_extra
 from suspension_tuning.vehicle.scenarios import run_scenario
 
 SCENARIO = 'ride'
@@ -157,8 +185,33 @@ def print_ratios(out: dict[str, Any], noisy: bool) -> None:
     print(f'optimum_gap_pct{tag}: {out["summaries"]["dq_simplified"]["max_gap_pct"]:.3f}')
 
 
+def print_peers(out: dict[str, Any], noisy: bool) -> None:
+    """Each peer's median full runs to solve (within 300) and the best peer's figures."""
+    tag = '_noisy' if noisy else ''
+    p = out['peers']
+    for peer, median in p['peer_medians'].items():
+        print(f'peer_median_full_runs_{peer}{tag}: {runs_to_solve(median)}')
+    print(f'peer_best_ride4{tag}: {p["best_peer"]}')
+    print(f'peer_best_full_runs_ride4{tag}: {runs_to_solve(p["peer_best_full_runs"])}')
+    print(f'full_runs_ratio_vs_best_peer{tag}: {p["full_runs_ratio_vs_best_peer"]:.2f}')
+    print(f'full_runs_ratio_vs_best_peer_with_calibration{tag}: '
+          f'{p["full_runs_ratio_vs_best_peer_with_calibration"]:.2f}')
+
+
+def default_jobs() -> int:
+    """2 worker processes when the machine is otherwise idle, else 1."""
+    return 2 if (os.cpu_count() or 1) >= 2 and os.getloadavg()[0] < 0.5 else 1
+
+
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--jobs', type=int, default=None,
+                        help="worker processes for the peers' runs (default: see above)")
+    args = parser.parse_args()
+    jobs = default_jobs() if args.jobs is None else max(1, args.jobs)
+    install_study_extra()
     t0 = time.perf_counter()
+    print(f'bench_method_jobs: {jobs}')
     reference = mb.reference_for(SCENARIO, N_VARS)
     check = run_scenario(SCENARIO, np.array([reference.x]), n_vars=N_VARS,
                          integrator=mb.REFERENCE_INTEGRATOR)
@@ -170,20 +223,24 @@ def main() -> None:
     for label, x0 in starts:
         print(f'ride4_start_point_{label}: {np.round(x0, 4).tolist()}')
 
+    peers = dict(peers=PEERS, stop_when_solved=True, jobs=jobs)
     fixed = mb.run_benchmark(SCENARIO, N_VARS, mb.REFERENCE_INTEGRATOR, reference,
-                             {'slsqp': SLSQP_EPS}, starts=starts)
+                             {'slsqp': SLSQP_EPS}, starts=starts, **peers)
     print_case(fixed, '', reference)
     print_ratios(fixed, noisy=False)
+    print_peers(fixed, noisy=False)
     print(f'bench_method_fixed_step_wall_s: {time.perf_counter() - t0:.1f}')
 
     est = noise_optimal_fd_step(SCENARIO, N_VARS, NOISY)
     print(f'noisy_fd_step_more_wild: {est["step"]:.4f}')
     print(f'noisy_fd_step_search_full_runs: {est["full_runs"]}')
     noisy = mb.run_benchmark(SCENARIO, N_VARS, NOISY, reference,
-                             {'slsqp': SLSQP_EPS, 'slsqp_best_fd': est['step']}, starts=starts)
+                             {'slsqp': SLSQP_EPS, 'slsqp_best_fd': est['step']}, starts=starts,
+                             **peers)
     print_case(noisy, '_noisy', reference)
     print(f'noisy_best_slsqp_variant: {noisy["slsqp"]}')
     print_ratios(noisy, noisy=True)
+    print_peers(noisy, noisy=True)
     print(f'slsqp_default_gap_pct_noisy: '
           f'{noisy["summaries"]["slsqp"]["max_gap_pct"]:.3f}')
     for name, target in TARGETS.items():

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from suspension_tuning.metric_names import METRIC_NAMES, TYRES  # noqa: F401
 from suspension_tuning.vehicle.design import VARIABLE_NAMES, validate_design
 from suspension_tuning.vehicle.mixed import run_mixed
 from suspension_tuning.vehicle.params import (
@@ -27,30 +28,6 @@ from suspension_tuning.vehicle.scenarios import SCENARIOS as MODEL_SCENARIOS
 from suspension_tuning.vehicle.scenarios import ScenarioResult, run_scenario
 
 Array = NDArray[np.float64]
-TYRES = ('fl', 'fr', 'rl', 'rr')
-
-
-def _per_tyre(name: str) -> tuple[str, ...]:
-    return tuple(f'{name}_{tyre}' for tyre in TYRES)
-
-
-#: Metric names of each scenario as :func:`metric_table` flattens them (units in the
-#: names; per-tyre metrics split into ``_fl`` .. ``_rr``, pairs into ``_0``, ``_1``).
-#: What an extra constraint of the optimisation may bound (``tuning.ConstraintSpec``).
-METRIC_NAMES: dict[str, tuple[str, ...]] = {
-    'ride': ('a_rms_driver_mps2', 'a_rms_passenger_mps2', 'roll_rms_deg',
-             'roll_rate_rms_deg_s', *_per_tyre('tyre_lift_off_fraction'),
-             *_per_tyre('strut_stroke_max_m'), 'speed_mean_mps'),
-    'handling': ('roll_first_peak_deg', 'roll_rate_rms_deg_s', 'roll_max_deg',
-                 'lateral_accel_max_mps2', 'path_error_max_m', 'cone_violation_m',
-                 'steer_max_deg', *_per_tyre('tyre_lift_off_fraction'), 'speed_min_mps',
-                 't_first_lane_change_s_0', 't_first_lane_change_s_1', 't_manoeuvre_s_0',
-                 't_manoeuvre_s_1'),
-    'mixed': ('a_rms_driver_mps2', 'a_rms_passenger_mps2', 'roll_first_peak_deg',
-              'roll_rate_rms_deg_s', 'valve_switches', 'handling_state_fraction'),
-}
-
-
 @dataclass
 class DesignEvaluation:
     """Objective, constraints and named metrics of a batch of designs.

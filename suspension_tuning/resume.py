@@ -2,7 +2,7 @@
 
 The bag's ``/optimisation/run_config`` says what ran (scenario, variables, gradient
 source, Dynamic-Q options, calibration samples) and its ``/optimisation/progress``
-records say where it got to (:func:`suspension_tuning.inspect_bag.last_iteration`).
+records say where it got to (:func:`suspension_tuning.bag.history.last_iteration`).
 The run continues from the last record with the same loop the coordinator uses
 (:func:`suspension_tuning.tuning.optimise`), the physics called directly.
 """
@@ -16,7 +16,7 @@ from typing import Any
 from scipy.optimize import OptimizeResult
 
 from suspension_tuning import evaluation
-from suspension_tuning.inspect_bag import last_iteration
+from suspension_tuning.bag.history import last_iteration
 from suspension_tuning.tuning import RunCounter, TuningRequest, optimise
 from suspension_tuning.vehicle.params import INTEGRATORS
 

@@ -155,7 +155,7 @@ class ConstraintSpec:
 
     def __post_init__(self) -> None:
         """Validate the fields; the objective's name is stored as 'f'."""
-        from suspension_tuning.evaluation import METRIC_NAMES
+        from suspension_tuning.metric_names import METRIC_NAMES
 
         if self.scenario not in CONSTRAINT_SCENARIOS:
             raise ValueError(f'constraint: unknown scenario {self.scenario!r}; '

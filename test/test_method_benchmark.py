@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.stats import qmc
 
-from suspension_tuning import study
+from suspension_tuning.studies import common, method_study
 from suspension_tuning.studies import method_benchmark as mb
 
 F_REF = 0.105  # a made-up reference f for the hand-built histories
@@ -93,8 +93,8 @@ def test_the_six_start_points():
     starts = mb.benchmark_starts(4)
     assert [name for name, _ in starts] == ['baseline', 'centre', 'lhs0', 'lhs1', 'lhs2',
                                             'lhs3']
-    np.testing.assert_array_equal(starts[0][1], study.start_point('baseline', 4))
-    np.testing.assert_array_equal(starts[1][1], study.start_point('centre', 4))
+    np.testing.assert_array_equal(starts[0][1], common.start_point('baseline', 4))
+    np.testing.assert_array_equal(starts[1][1], common.start_point('centre', 4))
     # the benchmark's definition: 4 seeded Latin-hypercube points in [0.001, 1]^4
     lhs = 0.001 + 0.999 * qmc.LatinHypercube(d=4, seed=7).random(4)
     np.testing.assert_array_equal(np.array([x for _, x in starts[2:]]), lhs)
@@ -130,7 +130,7 @@ def test_the_references_file_holds_the_known_optima_or_better():
 @pytest.mark.parametrize('key', ['ride_4var', 'handling_2var'])
 def test_the_committed_reference_is_what_the_model_gives_today(key):
     ref = mb.load_references()[key]
-    run, _ = study.committed_reference_run(ref, 'fixed_step', record=False)
+    run, _ = method_study.committed_reference_run(ref, 'fixed_step', record=False)
     # the model is deterministic: the committed design re-run gives the committed f
     # (1e-9 relative: only a change of the model or its configuration moves it)
     assert run.details['f_rerun'] == pytest.approx(ref.f, rel=1e-9)
@@ -160,8 +160,8 @@ def test_slsqp_runs_keep_every_evaluation_in_order(monkeypatch):
             self.f = (x[:, 0] - 0.7) ** 2 + (x[:, 1] - 0.2) ** 2
             self.g = -np.ones((len(x), 4))
 
-    monkeypatch.setattr(study, 'run_scenario', lambda sc, x, **kw: Result(np.asarray(x)))
-    run, _ = study.run_slsqp('ride', 2, 'lhs0', record=False, x0=[0.3, 0.6])
+    monkeypatch.setattr(common, 'run_scenario', lambda sc, x, **kw: Result(np.asarray(x)))
+    run, _ = common.run_slsqp('ride', 2, 'lhs0', record=False, x0=[0.3, 0.6])
     ev = run.evaluations
     assert ev[0]['x'] == [0.3, 0.6]  # x0 replaces the named start, evaluated first
     assert [e['n_full_runs'] for e in ev] == list(range(1, run.n_full_runs + 1))

@@ -148,7 +148,7 @@ def test_a_constrained_run_resumes_from_its_bag_with_its_constraints(tmp_path):
     # five-iteration run (deterministic model and optimiser; the bag's run
     # configuration carries the extra constraint).
     from suspension_tuning.resume import resume
-    from suspension_tuning.study import run_dynamic_q, vehicle_options, write_bag
+    from suspension_tuning.studies.common import run_dynamic_q, vehicle_options, write_bag
 
     spec = ['handling:f_hand<=1.2']  # active: the ride optimum has f_hand ~1.8
     short, recorder = run_dynamic_q('ride', 2, 'centre', 'full',

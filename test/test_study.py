@@ -15,17 +15,19 @@ import pytest
 
 from suspension_tuning.bag.reader import read_messages
 from suspension_tuning.inspect_bag import summary
-from suspension_tuning.study import (
+from suspension_tuning.studies.common import (
     StudyRun,
     active_constraints,
-    cost_ratios,
     grid_designs,
-    main,
+    start_point,
+)
+from suspension_tuning.studies.method_study import (
+    cost_ratios,
     markdown_tables,
     run_case,
     run_study,
-    start_point,
 )
+from suspension_tuning.study import main
 from suspension_tuning.vehicle.design import X_LOWER, X_UPPER
 
 N = 2  # design variables of the quick case (eq. 5)
@@ -151,7 +153,7 @@ def test_dynamic_q_runs_report_the_best_feasible_iterate_and_keep_the_last_in_de
     """One Dynamic-Q step (maxiter 1) from the centre crosses a constraint the gradient
     misses: f = -(x1 + x2), g = x1 - 0.6, dg = 0 (a boundary the simplified model
     places only roughly).  The run reports the feasible start, not the last iterate."""
-    from suspension_tuning import study
+    from suspension_tuning.studies import common as study
     from suspension_tuning.tuning import FullEvaluation
 
     def fake_model(scenario, n_vars, integrator=None):
@@ -211,7 +213,7 @@ def test_cli_rejects_an_unknown_scenario(capsys):
 
 
 def test_forward_difference_step_balances_truncation_and_noise():
-    from suspension_tuning.study import forward_difference_step
+    from suspension_tuning.studies.method_study import forward_difference_step
 
     # More & Wild: h* = 8^(1/4) sqrt(eps / |f''|); eps = 1e-4, f'' = 2 (f = x^2):
     # 1.6818 * sqrt(5e-5) = 0.011892
@@ -226,7 +228,7 @@ def test_forward_difference_step_balances_truncation_and_noise():
 
 
 def test_noisy_ratios_pick_the_cheapest_slsqp_variant_within_one_percent():
-    from suspension_tuning.study import StudyRun, noisy_ratios
+    from suspension_tuning.studies.method_study import StudyRun, noisy_ratios
 
     def run(method, start, runs, gap, cal=0):
         r = StudyRun('ride', 4, start, method, cal, [0.5] * 4, -0.15, [-1.0] * 4, 0.0, 5,
@@ -249,7 +251,7 @@ def test_noisy_ratios_pick_the_cheapest_slsqp_variant_within_one_percent():
 
 
 def test_study_run_configuration_names_the_integrator():
-    from suspension_tuning.study import StudyRun, run_config
+    from suspension_tuning.studies.common import StudyRun, run_config
 
     run = StudyRun('ride', 2, 'centre', 'slsqp', 0, [0.5, 0.5], -0.15, [-1.0] * 4, 0.0, 3,
                    20, 0, 0, 1.0, details={'integrator': 'variable_step', 'eps': 0.07})

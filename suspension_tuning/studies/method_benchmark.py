@@ -23,14 +23,26 @@ Definitions (the benchmark's docstring repeats them):
   :data:`SOLVED_VIOLATION`, g of the model the method ran on.
 * **Full runs to solve**: the cumulative full-model run count at the first record whose
   reported design is solved; ``inf`` if none is.  Calibration runs are not included.
+* **Peers**: the optimisers an engineer would pick instead
+  (:mod:`~suspension_tuning.studies.peers`: COBYLA, COBYQA, NOMAD, Optuna TPE) and
+  SLSQP (default step; on the noisy model also the noise-optimal step), each from the
+  same starts with a budget of :data:`~suspension_tuning.studies.peers.PEER_BUDGET`
+  full runs.  A peer's figure is the median over the starts of its full runs to solve;
+  the best peer is the one with the smallest (:func:`peer_figures`).
+* **Within budget**: the reported design after the first
+  :data:`~suspension_tuning.studies.peers.PEER_BUDGET` full runs of a run (every method,
+  ours included): its gap (``budget_gap_pct``) and its largest g on the run's model
+  (``budget_max_violation``, the final violation).
 """
 
 from __future__ import annotations
 
 import json
 import math
+import multiprocessing
 import time
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -38,8 +50,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from suspension_tuning import study
 from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
+from suspension_tuning.studies import common
+from suspension_tuning.studies.peers import PEER_BUDGET, PEERS
 from suspension_tuning.vehicle.scenarios import run_scenario
 
 Array = NDArray[np.float64]
@@ -65,6 +78,8 @@ LHS_STARTS = 4
 CALIBRATION_SAMPLES = 16
 #: Designs per full-model batch when re-running designs on the fixed-step model [E].
 JUDGE_BATCH = 32
+#: The SLSQP variants, peers as well (SciPy's default step; the noise-optimal step).
+SLSQP_VARIANTS = ('slsqp', 'slsqp_best_fd')
 
 
 def case_key(scenario: str, n_vars: int) -> str:
@@ -82,7 +97,7 @@ def benchmark_starts(n_vars: int) -> list[tuple[str, Array]]:
     from scipy.stats import qmc
 
     lhs = 0.001 + 0.999 * qmc.LatinHypercube(d=n_vars, seed=LHS_SEED).random(LHS_STARTS)
-    starts = [(name, study.start_point(name, n_vars)) for name in ('baseline', 'centre')]
+    starts = [(name, common.start_point(name, n_vars)) for name in ('baseline', 'centre')]
     return starts + [(f'lhs{k}', np.asarray(x, float)) for k, x in enumerate(lhs)]
 
 
@@ -124,7 +139,7 @@ class Reference:
     @property
     def max_violation(self) -> float:
         """max(0, max g)."""
-        return study.max_violation(self.g)
+        return common.max_violation(self.g)
 
     @property
     def feasible(self) -> bool:
@@ -221,25 +236,25 @@ def search_reference(scenario: str, n_vars: int, grid_points: int | None = None,
                      log: Callable[[str], None] = print) -> Reference:
     """Search one case's reference optimum on the fixed-step model.
 
-    The method study's search (:func:`suspension_tuning.study.reference_optimum`: a
-    full-factorial grid of :data:`~suspension_tuning.study.GRID_POINTS` points per
+    The method study's search (:func:`suspension_tuning.studies.common.reference_optimum`: a
+    full-factorial grid of :data:`~suspension_tuning.studies.common.GRID_POINTS` points per
     axis, then SciPy SLSQP with its default step from the 3 best feasible grid points)
     polishing also from the designs that Dynamic-Q with full-model gradients and with
     simplified gradients (``calibration_samples``) reach from every start of
     :func:`benchmark_starts`.  The reference is the best feasible point seen.
     """
     t0 = time.perf_counter()
-    points = study.GRID_POINTS[n_vars] if grid_points is None else grid_points
+    points = common.GRID_POINTS[n_vars] if grid_points is None else grid_points
     integrator = REFERENCE_INTEGRATOR
     scaling = calibrate(scenario, n_vars, n_samples=calibration_samples,
                         run_full=lambda sc, x: run_scenario(sc, x, integrator=integrator))
-    gradient = SimplifiedGradient(scenario, n_vars, scaling, study.FD_STEP)
+    gradient = SimplifiedGradient(scenario, n_vars, scaling, common.FD_STEP)
     finals: dict[bytes, Array] = {}
     method_f: dict[str, float] = {}
     method_runs = calibration_samples
     for label, x0 in benchmark_starts(n_vars):
         for source in ('full', 'simplified'):
-            run, _ = study.run_dynamic_q(
+            run, _ = common.run_dynamic_q(
                 scenario, n_vars, label, source, gradient if source == 'simplified' else None,
                 calibration_samples if source == 'simplified' else 0, record=False, x0=x0,
                 integrator=integrator)
@@ -249,7 +264,7 @@ def search_reference(scenario: str, n_vars: int, grid_points: int | None = None,
             finals.setdefault(x.tobytes(), x)
             log(f'  {case_key(scenario, n_vars)} {label} dq_{source}: f = {run.f:.6f}, '
                 f'max violation {run.max_violation:.3g}')
-    ref, _ = study.reference_optimum(scenario, n_vars, points, list(finals.values()),
+    ref, _ = common.reference_optimum(scenario, n_vars, points, list(finals.values()),
                                      gtol=REPORT_GTOL, record=False, integrator=integrator)
     d = ref.details
     search = {
@@ -258,12 +273,12 @@ def search_reference(scenario: str, n_vars: int, grid_points: int | None = None,
         'grid_runs': d['grid_runs'],
         'grid_best_f': d['grid_best_f'],
         'polish': ('SciPy SLSQP (maxiter 100, ftol 1e-6, 2-point differences with step '
-                   f'{d["polish_eps"]:.3g}) from the {study.POLISH_STARTS} best feasible grid '
+                   f'{d["polish_eps"]:.3g}) from the {common.POLISH_STARTS} best feasible grid '
                    'points and from the distinct designs of Dynamic-Q with full-model and '
                    f'with simplified gradients (N = {calibration_samples}) from the '
                    'benchmark starts'),
         'starts': {label: np.round(x, 6).tolist() for label, x in benchmark_starts(n_vars)},
-        'polish_starts': len(finals) + min(study.POLISH_STARTS, d['grid_runs']),
+        'polish_starts': len(finals) + min(common.POLISH_STARTS, d['grid_runs']),
         'polished_from_grid_best_f': d['polished_from_grid_best_f'],
         'polished_from_methods_best_f': d['polished_from_methods_best_f'],
         'dynamic_q_f': method_f,
@@ -272,7 +287,7 @@ def search_reference(scenario: str, n_vars: int, grid_points: int | None = None,
         'wall_time_s': round(time.perf_counter() - t0, 1),
     }
     return Reference(scenario, n_vars, ref.x, ref.f, ref.g,
-                     found_by=f'study.reference_optimum: grid {points}^{n_vars} then SLSQP '
+                     found_by=f'common.reference_optimum: grid {points}^{n_vars} then SLSQP '
                               'polish; best feasible point seen', search=search)
 
 
@@ -386,6 +401,13 @@ class StartResult:
         The run's total full-model runs.
     wall_time_s : float
         The run's wall time.
+    budget_gap_pct, budget_max_violation : float
+        Gap and largest g (the run's model) of the reported design after the first
+        ``budget`` full runs (the least violating design when none was feasible).
+    budget_feasible : bool
+        A design was feasible within the budget.
+    budget : int
+        That budget (:data:`~suspension_tuning.studies.peers.PEER_BUDGET`).
     """
 
     method: str
@@ -402,9 +424,13 @@ class StartResult:
     full_runs_to_solve: float
     full_runs: int
     wall_time_s: float
+    budget_gap_pct: float = math.nan
+    budget_max_violation: float = math.nan
+    budget_feasible: bool = False
+    budget: int = PEER_BUDGET
 
 
-def run_records(run: study.StudyRun) -> list[dict[str, Any]]:
+def run_records(run: common.StudyRun) -> list[dict[str, Any]]:
     """The records along which a run's reported design is followed.
 
     SLSQP: every design it evaluated (``run.evaluations``); Dynamic-Q: its iterates.
@@ -412,8 +438,29 @@ def run_records(run: study.StudyRun) -> list[dict[str, Any]]:
     return run.evaluations or run.history
 
 
-def judge_run(run: study.StudyRun, x0: ArrayLike, reference: Reference,
-              judge: FixedStepJudge, noisy: bool) -> StartResult:
+def reported_within(records: Sequence[Mapping[str, Any]], budget: int,
+                    judge: FixedStepJudge | None) -> tuple[float | None, float, bool]:
+    """f (fixed-step model), largest g and feasibility of the design reported after
+    ``budget`` full runs; f is None when no record lies within the budget.
+    """  # noqa: D205
+    within = [r for r in records if int(r['n_full_runs']) <= budget]
+    if not within:
+        return None, math.inf, False
+    candidates = reported_designs(within)
+    if candidates:
+        x, f, viol, feasible = candidates[-1].x, candidates[-1].f, \
+            candidates[-1].max_violation, True
+    else:
+        least = min(within, key=lambda r: float(r['max_violation']))
+        x, f, viol, feasible = least['x'], float(least['f']), \
+            float(least['max_violation']), False
+    if judge is not None:
+        f = float(judge.f([x])[0])
+    return f, viol, feasible
+
+
+def judge_run(run: common.StudyRun, x0: ArrayLike, reference: Reference,
+              judge: FixedStepJudge, noisy: bool, budget: int = PEER_BUDGET) -> StartResult:
     """A run's reported design and its full runs to solve (see the module docstring)."""
     records = run_records(run)
     candidates = reported_designs(records)
@@ -425,53 +472,108 @@ def judge_run(run: study.StudyRun, x0: ArrayLike, reference: Reference,
         x, f, viol, feasible = (list(map(float, least['x'])), float(least['f']),
                                 float(least['max_violation']), False)
     f_fixed, g_fixed = judge([x]) if noisy else (np.array([f]), None)
-    viol_fixed = study.max_violation(g_fixed[0]) if noisy else viol
+    viol_fixed = common.max_violation(g_fixed[0]) if noisy else viol
     gap = gap_pct(f_fixed[0], reference.f)
     to_solve = full_runs_to_solve(records, reference.f, judge.f if noisy else None)
+    f_budget, viol_budget, feasible_budget = reported_within(
+        records, budget, judge if noisy else None)
     return StartResult(
         method=run.method, start=run.start, x0=np.asarray(x0, float).tolist(), x=x, f=f,
         max_violation=viol, f_fixed_step=float(f_fixed[0]),
         max_violation_fixed_step=float(viol_fixed), gap_pct=gap, feasible=feasible,
         solved=feasible and gap <= SOLVED_GAP_PCT and viol <= SOLVED_VIOLATION,
         full_runs_to_solve=to_solve, full_runs=run.n_full_runs,
-        wall_time_s=run.wall_time_s)
+        wall_time_s=run.wall_time_s,
+        budget_gap_pct=math.nan if f_budget is None else gap_pct(f_budget, reference.f),
+        budget_max_violation=viol_budget, budget_feasible=feasible_budget, budget=budget)
+
+
+def solved_watch(reference: Reference, judge: FixedStepJudge | None
+                 ) -> Callable[[Mapping[str, Any]], bool]:
+    """A ``stop_when`` for a run: True at the first record whose reported design is
+    solved (gap <= 1 %, max g <= 0.005; with ``judge`` the gap of the fixed-step f).
+    """  # noqa: D205
+    best = [math.inf]
+
+    def solved(rec: Mapping[str, Any]) -> bool:
+        viol = float(rec['max_violation'])
+        if viol > REPORT_GTOL or float(rec['f']) >= best[0]:
+            return False
+        best[0] = float(rec['f'])
+        f = best[0] if judge is None else float(judge.f([rec['x']])[0])
+        return gap_pct(f, reference.f) <= SOLVED_GAP_PCT and viol <= SOLVED_VIOLATION
+
+    return solved
 
 
 def run_method(method: str, scenario: str, n_vars: int, label: str, x0: ArrayLike,
                integrator: str, gradient: SimplifiedGradient | None = None,
-               eps: float = study.SLSQP_EPS) -> study.StudyRun:
-    """One run of a method from ``x0`` (no bag)."""
+               eps: float = common.SLSQP_EPS, budget: int | None = None,
+               stop_when: Callable[[Mapping[str, Any]], bool] | None = None,
+               ) -> common.StudyRun:
+    """One run of a method from ``x0`` (no bag).
+
+    ``budget`` caps the full runs of SLSQP and of a peer (a peer's default:
+    :data:`~suspension_tuning.studies.peers.PEER_BUDGET`); ``stop_when`` ends a peer's
+    run early (see :class:`~suspension_tuning.studies.peers.CountedProblem`).
+    """
+    if method in PEERS:
+        return common.run_peer(method, scenario, n_vars, label, x0, integrator,
+                               PEER_BUDGET if budget is None else budget, stop_when)
     if method in ('dq_simplified', 'dq_full'):
         source = 'simplified' if method == 'dq_simplified' else 'full'
         if source == 'simplified' and gradient is None:
             raise ValueError('dq_simplified needs a simplified gradient')
-        return study.run_dynamic_q(scenario, n_vars, label, source,
+        return common.run_dynamic_q(scenario, n_vars, label, source,
                                    gradient if source == 'simplified' else None,
                                    CALIBRATION_SAMPLES if source == 'simplified' else 0,
                                    record=False, x0=x0, integrator=integrator)[0]
     if method in ('slsqp', 'slsqp_best_fd'):
-        return study.run_slsqp(scenario, n_vars, label, record=False, eps=eps,
-                               integrator=integrator, method=method, x0=x0)[0]
+        return common.run_slsqp(scenario, n_vars, label, record=False, eps=eps,
+                                integrator=integrator, method=method, x0=x0,
+                                budget=budget)[0]
     raise ValueError(f'unknown method {method!r}')
 
 
 def run_starts(method: str, scenario: str, n_vars: int, reference: Reference,
                integrator: str, judge: FixedStepJudge,
                starts: Sequence[tuple[str, Array]] | None = None,
-               gradient: SimplifiedGradient | None = None, eps: float = study.SLSQP_EPS,
-               log: Callable[[str], None] | None = None) -> list[StartResult]:
-    """A method from every start (default :func:`benchmark_starts`), judged."""
+               gradient: SimplifiedGradient | None = None, eps: float = common.SLSQP_EPS,
+               log: Callable[[str], None] | None = None, budget: int | None = None,
+               stop_when_solved: bool = False) -> list[StartResult]:
+    """A method from every start (default :func:`benchmark_starts`), judged.
+
+    ``budget``: see :func:`run_method`; ``stop_when_solved`` ends a peer's run at its
+    first solved reported design (all that its full runs to solve need).
+    """
     starts = benchmark_starts(n_vars) if starts is None else starts
     noisy = integrator != REFERENCE_INTEGRATOR
     out = []
     for label, x0 in starts:
-        run = run_method(method, scenario, n_vars, label, x0, integrator, gradient, eps)
-        out.append(judge_run(run, x0, reference, judge, noisy))
+        watch = (solved_watch(reference, judge if noisy else None)
+                 if stop_when_solved and method in PEERS else None)
+        run = run_method(method, scenario, n_vars, label, x0, integrator, gradient, eps,
+                         budget, watch)
+        out.append(judge_run(run, x0, reference, judge, noisy,
+                             PEER_BUDGET if budget is None else budget))
         if log is not None:
-            r = out[-1]
-            log(f'  {method} {label}: gap {r.gap_pct:+.3f} %, full runs to solve '
-                f'{r.full_runs_to_solve:g} of {r.full_runs}, {r.wall_time_s:.1f} s')
+            log(start_line(out[-1]))
     return out
+
+
+def start_line(r: StartResult) -> str:
+    """One progress line on a judged run."""
+    return (f'  {r.method} {r.start}: gap {r.gap_pct:+.3f} %, full runs to solve '
+            f'{r.full_runs_to_solve:g} of {r.full_runs}, {r.wall_time_s:.1f} s')
+
+
+def _peer_task(method: str, scenario: str, n_vars: int, label: str, x0: Array,
+               integrator: str, reference: Reference, budget: int,
+               stop_when_solved: bool) -> StartResult:
+    """One peer from one start, judged, in a worker process (its own judge)."""
+    judge = FixedStepJudge(scenario, n_vars)
+    return run_starts(method, scenario, n_vars, reference, integrator, judge,
+                      [(label, x0)], budget=budget, stop_when_solved=stop_when_solved)[0]
 
 
 # ---------------------------------------------------------------------- figures
@@ -497,6 +599,39 @@ def summary(results: Sequence[StartResult]) -> dict[str, float]:
         'max_final_violation': max(r.max_violation for r in results),
         'max_final_violation_fixed_step': max(r.max_violation_fixed_step for r in results),
     }
+
+
+def peer_median(results: Sequence[StartResult], budget: int = PEER_BUDGET) -> float:
+    """Median over the starts of full runs to solve within ``budget`` (else ``inf``)."""
+    return float(np.median([r.full_runs_to_solve if r.full_runs_to_solve <= budget
+                            else math.inf for r in results]))
+
+
+def peer_figures(results: Mapping[str, Sequence[StartResult]], ours: float,
+                 calibration_runs: int, budget: int = PEER_BUDGET) -> dict[str, Any]:
+    """The peers' medians, the best peer and our ratios against it.
+
+    Peers are the methods of ``results`` in :data:`~suspension_tuning.studies.peers.PEERS`
+    and :data:`SLSQP_VARIANTS`.  ``ours``: our median full runs to solve.
+
+    Returns
+    -------
+    dict
+        ``peer_medians`` (peer -> :func:`peer_median`), ``best_peer``,
+        ``peer_best_full_runs`` (the smallest median, ``inf`` if no peer's is reached),
+        ``full_runs_ratio_vs_best_peer`` and ``..._with_calibration`` (ours plus
+        ``calibration_runs``), as :func:`run_ratio`.
+    """
+    medians = {m: peer_median(rs, budget) for m, rs in results.items()
+               if m in PEERS or m in SLSQP_VARIANTS}
+    if not medians:
+        raise ValueError('no peer ran')
+    best = min(medians, key=lambda m: medians[m])
+    value = medians[best]
+    return {'peer_medians': medians, 'best_peer': best, 'peer_best_full_runs': value,
+            'full_runs_ratio_vs_best_peer': run_ratio(value, ours),
+            'full_runs_ratio_vs_best_peer_with_calibration': run_ratio(
+                value, ours + calibration_runs)}
 
 
 def run_ratio(other: float, ours: float) -> float:
@@ -527,13 +662,20 @@ def run_benchmark(scenario: str, n_vars: int, integrator: str, reference: Refere
                   slsqp_steps: Mapping[str, float] | None = None,
                   calibration_samples: int = CALIBRATION_SAMPLES,
                   starts: Sequence[tuple[str, Array]] | None = None,
-                  log: Callable[[str], None] | None = None) -> dict[str, Any]:
+                  log: Callable[[str], None] | None = None,
+                  peers: Sequence[str] = (), budget: int = PEER_BUDGET,
+                  stop_when_solved: bool = False, jobs: int = 1) -> dict[str, Any]:
     """Every method from every start on one model, judged against the reference.
 
     Dynamic-Q with simplified gradients (one eq. 25 calibration of
     ``calibration_samples`` full runs on ``integrator``, shared by the starts),
     Dynamic-Q with full-model central differences, and SLSQP with each step of
-    ``slsqp_steps`` (name -> step; default SciPy's).
+    ``slsqp_steps`` (name -> step; default SciPy's), capped at ``budget`` full runs,
+    and each of ``peers`` (:data:`~suspension_tuning.studies.peers.PEERS`) with that
+    budget; ``stop_when_solved`` ends a peer's run at its first solved design.  With
+    ``jobs`` > 1 the peers' runs go to that many worker processes while this one runs
+    the rest (the figures do not depend on it: every method and model is
+    deterministic, Optuna's sampler seeded).
 
     Returns
     -------
@@ -542,25 +684,48 @@ def run_benchmark(scenario: str, n_vars: int, integrator: str, reference: Refere
         :func:`summary`), ``slsqp`` (the better SLSQP variant), ``calibration_runs``,
         ``calibration_wall_s`` and ``ratios``: ``full_runs_ratio_vs_slsqp``,
         ``full_runs_ratio_vs_dq_full`` and their ``..._with_calibration`` (median full
-        runs to solve of the other method over ours, plus the calibration's runs).
+        runs to solve of the other method over ours, plus the calibration's runs); with
+        peers also ``peers`` (:func:`peer_figures`).
     """
     starts = benchmark_starts(n_vars) if starts is None else starts
-    slsqp_steps = {'slsqp': study.SLSQP_EPS} if slsqp_steps is None else slsqp_steps
+    for peer in peers:
+        if peer not in PEERS:
+            raise ValueError(f'unknown peer {peer!r}; valid: {", ".join(PEERS)}')
+    pool, futures = None, {}
+    if jobs > 1 and peers:
+        pool = ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context('spawn'))
+        futures = {(peer, label): pool.submit(_peer_task, peer, scenario, n_vars, label, x0,
+                                              integrator, reference, budget,
+                                              stop_when_solved)
+                   for peer in peers for label, x0 in starts}
+    slsqp_steps = {'slsqp': common.SLSQP_EPS} if slsqp_steps is None else slsqp_steps
     judge = FixedStepJudge(scenario, n_vars)
     t0 = time.perf_counter()
     scaling = calibrate(scenario, n_vars, n_samples=calibration_samples,
                         run_full=lambda sc, x: run_scenario(sc, x, integrator=integrator))
     cal_wall = time.perf_counter() - t0
-    gradient = SimplifiedGradient(scenario, n_vars, scaling, study.FD_STEP)
-    common = dict(judge=judge, starts=starts, log=log)
+    gradient = SimplifiedGradient(scenario, n_vars, scaling, common.FD_STEP)
+    shared = dict(judge=judge, starts=starts, log=log)
     results = {
         'dq_simplified': run_starts('dq_simplified', scenario, n_vars, reference, integrator,
-                                    gradient=gradient, **common),
-        'dq_full': run_starts('dq_full', scenario, n_vars, reference, integrator, **common),
+                                    gradient=gradient, **shared),
+        'dq_full': run_starts('dq_full', scenario, n_vars, reference, integrator, **shared),
     }
     for name, eps in slsqp_steps.items():
         results[name] = run_starts(name, scenario, n_vars, reference, integrator, eps=eps,
-                                   **common)
+                                   budget=budget, **shared)
+    for peer in peers:
+        if pool is not None:
+            results[peer] = [futures[peer, label].result() for label, _ in starts]
+            for r in results[peer]:
+                if log is not None:
+                    log(start_line(r))
+        else:
+            results[peer] = run_starts(peer, scenario, n_vars, reference, integrator,
+                                       budget=budget, stop_when_solved=stop_when_solved,
+                                       **shared)
+    if pool is not None:
+        pool.shutdown()
     slsqp = pick_slsqp_variant({name: results[name] for name in slsqp_steps})
     summaries = {name: summary(rs) for name, rs in results.items()}
     ours = summaries['dq_simplified']['median_full_runs']
@@ -570,6 +735,10 @@ def run_benchmark(scenario: str, n_vars: int, integrator: str, reference: Refere
         ratios[f'full_runs_ratio_vs_{label}'] = run_ratio(theirs, ours)
         ratios[f'full_runs_ratio_vs_{label}_with_calibration'] = run_ratio(
             theirs, ours + calibration_samples)
-    return {'results': results, 'summaries': summaries, 'slsqp': slsqp,
-            'calibration_runs': calibration_samples, 'calibration_wall_s': cal_wall,
-            'ratios': ratios, 'integrator': integrator}
+    out = {'results': results, 'summaries': summaries, 'slsqp': slsqp,
+           'calibration_runs': calibration_samples, 'calibration_wall_s': cal_wall,
+           'ratios': ratios, 'integrator': integrator, 'budget': budget,
+           'starts': [(label, np.asarray(x0, float).tolist()) for label, x0 in starts]}
+    if peers:
+        out['peers'] = peer_figures(results, ours, calibration_samples, budget)
+    return out

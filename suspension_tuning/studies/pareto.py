@@ -62,7 +62,7 @@ Array = NDArray[np.float64]
 
 #: Front points (eps values) per number of variables [issue: at least 8 for 4 variables].
 FRONT_POINTS = {2: 8, 4: 8}
-#: Start points of the single-objective optima (``study.start_point``).
+#: Start points of the single-objective optima (``common.start_point``).
 END_POINT_STARTS = ('centre', 'baseline')
 #: Paving length of the study's mixed runs, m [E]: 3 s of W_b settling plus 12 s of
 #: averaging at 65 km/h (271 m), the 12 s the ride scenario averages over; the 80 m of
@@ -252,7 +252,7 @@ def mixed_runs(passive_x: Array, x_ride: Array, x_hand: Array) -> dict[str, Any]
 def _optimise(objective: str, n_vars: int, start: str, x0: ArrayLike | None,
               gradients: dict[str, SimplifiedGradient], constraints: Sequence[ConstraintSpec],
               calibration_runs: int, record: bool):
-    from suspension_tuning.study import run_dynamic_q
+    from suspension_tuning.studies.common import run_dynamic_q
 
     return run_dynamic_q(objective, n_vars, start, 'simplified', gradients[objective],
                          calibration_runs, record=record, x0=x0, constraints=constraints,
@@ -303,8 +303,8 @@ def run_pareto(out: Path, n_vars: int = 4, n_points: int | None = None, bags: bo
     dict
         The JSON payload (points, front, switched, mixed, figures) plus ``markdown``.
     """
-    from suspension_tuning.demo import baseline_design
-    from suspension_tuning.study import vehicle_options, write_bag
+    from suspension_tuning.studies.common import vehicle_options, write_bag
+    from suspension_tuning.vehicle.design import baseline_design
 
     if n_vars not in (2, 4):
         raise ValueError(f'n_vars must be 2 or 4, got {n_vars}')

@@ -262,3 +262,14 @@ def from_physical(settings: AxleSettings, n_vars: int) -> np.ndarray:
         ],
         axis=1,
     )
+
+
+def baseline_design(n_vars: int) -> np.ndarray:
+    """The standard vehicle's settings (config/scenarios.yaml) as a normalised design."""
+    from suspension_tuning.vehicle.params import load_scenarios_config
+
+    base = load_scenarios_config()['baseline_design']
+    gas = float(base['gas_volume_l']) * 1e-3
+    settings = AxleSettings(*(np.array([v]) for v in (float(base['dpsf']), gas,
+                                                       float(base['dpsf']), gas)))
+    return from_physical(settings, n_vars)[0]
