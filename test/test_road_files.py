@@ -194,7 +194,7 @@ def test_road_names_files_and_entries_resolve_the_same_way(tmp_path):
     with pytest.raises(rf.RoadFileError, match='missing.crg: no such file'):
         road_mod.synthesise_tracks(road_mod.resolve_road(str(tmp_path / 'missing.crg')))
     # the run configuration's record: the file and its hash
-    identity = rf.road_identity(str(BLOCK))
+    identity = road_mod.road_identity(str(BLOCK))
     assert identity['file'] == str(BLOCK) and identity['sha256'] == rf.file_sha256(BLOCK)
 
 

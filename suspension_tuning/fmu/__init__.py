@@ -6,7 +6,8 @@ plugs the model in.
 """
 
 from suspension_tuning.fmu.mapping import FmuMapping, MappingError, load_mapping, parse_mapping
-from suspension_tuning.fmu.model import FmuConfigError, FmuModel, FmuRunError, worker_model
+from suspension_tuning.fmu.model import FmuConfigError, FmuModel, FmuRunError
+from suspension_tuning.fmu.worker import worker_model
 
 __all__ = ['FmuConfigError', 'FmuMapping', 'FmuModel', 'FmuRunError', 'MappingError',
            'load_mapping', 'parse_mapping', 'worker_model']

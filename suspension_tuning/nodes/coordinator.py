@@ -102,11 +102,11 @@ def ride_road_record(road: str) -> dict[str, Any]:
     """The run configuration's record of the ride road: the goal's, else the configured one.
 
     The road's name or file, and for a road file its path and SHA-256
-    (:func:`suspension_tuning.vehicle.road_files.road_identity`); the workers' model
+    (:func:`suspension_tuning.vehicle.road.road_identity`); the workers' model
     fingerprint covers every file config/road.yaml names too.
     """
     from suspension_tuning.vehicle.params import load_scenarios_config
-    from suspension_tuning.vehicle.road_files import road_identity
+    from suspension_tuning.vehicle.road import road_identity
 
     source = 'goal' if road else 'config/scenarios.yaml ride.road'
     try:

@@ -49,7 +49,7 @@ from suspension_tuning.optim.simplified_gradient import (
     fit_calibration,
 )
 from suspension_tuning.vehicle.design import VARIABLE_NAMES, validate_design
-from suspension_tuning.vehicle.road_files import road_identity
+from suspension_tuning.vehicle.road import road_identity
 
 SCENARIOS = ('ride', 'handling')
 

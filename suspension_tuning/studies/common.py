@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import OptimizeResult, minimize
 
+from suspension_tuning.model_identity import builtin_fingerprint
 from suspension_tuning.optim.dynamic_q import load_options
 from suspension_tuning.optim.simplified_gradient import SimplifiedGradient
 from suspension_tuning.paths import config_dir, dump_yaml
@@ -407,7 +408,7 @@ def run_dynamic_q(
         message=str(result.message),
         history=history,
         details={'optimiser_options': options, 'fd_step': FD_STEP,
-                 'integrator': integrator_name(integrator),
+                 **model_details(integrator),
                  'best_iteration': design.iteration, 'best_feasible': design.feasible,
                  'x_last': np.asarray(result.x, float).tolist(), 'f_last': float(result.f),
                  'max_violation_last': max_violation(result.g)},  # fmt: skip
@@ -472,6 +473,16 @@ def recording(model: FullModelCache, history: list[dict[str, Any]], recorder: Re
         recorder.add(rec, counter)
 
     return add
+
+
+def model_details(integrator: str | None) -> dict[str, str]:
+    """A study run's full model: its integrator and fingerprint (model_identity).
+
+    Every study record and study bag carries them, as the graph's run configurations
+    do, so a result names the model that produced it.
+    """
+    name = integrator_name(integrator)
+    return {'integrator': name, 'model_fingerprint': builtin_fingerprint(name)}
 
 
 def integrator_name(integrator: str | None) -> str:
@@ -545,7 +556,7 @@ def run_slsqp(
             'eps': float(eps),
             'maxiter': maxiter,
             'ftol': 1e-6,
-            'integrator': integrator_name(integrator),
+            **model_details(integrator),
             'budget': budget,
         },
         evaluations=[
@@ -594,7 +605,7 @@ def run_peer(
         iterations=len(records), n_full_runs=problem.n_runs, n_simplified_runs=0,
         n_calibration_runs=0, wall_time_s=peer.wall_time_s,
         success=best['max_violation'] <= gtol, message=peer.message, history=history,
-        details={'budget': budget, 'integrator': integrator_name(integrator),
+        details={'budget': budget, **model_details(integrator),
                  'gtol': gtol},
         evaluations=records,
     )
@@ -718,7 +729,7 @@ def reference_optimum(
             'polished_from_methods_best_f': min(polished['method'], default=math.inf),
             'gtol': gtol,
             'polish_eps': float(polish_eps),
-            'integrator': integrator_name(integrator),
+            **model_details(integrator),
         },
     )
     return run, recorder

@@ -36,19 +36,19 @@ from __future__ import annotations
 
 import dataclasses
 import numbers
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from scipy import special
 
 from suspension_tuning.paths import config_dir, read_yaml
+from suspension_tuning.vehicle.road_profile import SIDES, RoadProfile, _check_side  # noqa: F401
 
 DEFAULT_CONFIG_PATH = config_dir() / 'road.yaml'
 """config/road.yaml of the source tree."""
 
 COHERENCE_MODELS = ('isotropic', 'identical', 'independent')
-SIDES = ('left', 'right', 'centre')
 
 
 @dataclass(frozen=True)
@@ -424,138 +424,6 @@ def left_right_coherence(n_cyc_per_m: np.ndarray, track_m: float, waviness: floa
     return np.clip(np.where(x > 0, g, 1.0), 0.0, 1.0)
 
 
-def _check_side(side: str) -> str:
-    if side not in SIDES:
-        raise ValueError(f'side must be one of {SIDES}, got {side!r}')
-    return side
-
-
-@dataclass(frozen=True, eq=False)
-class RoadProfile:
-    """Elevation of the left and right wheel tracks on a uniform x grid.
-
-    Attributes
-    ----------
-    x_m : np.ndarray
-        Longitudinal positions, m, shape (n,), strictly increasing and uniform.
-    z_left_m, z_right_m : np.ndarray
-        Elevations of the left and right tracks, m, shape (n,).
-    spec : RoadSpec or None
-        The specification the profile was synthesised from (None for bumps/flat roads).
-    """
-
-    x_m: np.ndarray
-    z_left_m: np.ndarray
-    z_right_m: np.ndarray
-    spec: RoadSpec | None = field(default=None, compare=False)
-
-    def __post_init__(self) -> None:
-        """Check shapes and monotonic x; store float copies of the arrays."""
-        for name in ('x_m', 'z_left_m', 'z_right_m'):
-            object.__setattr__(self, name, np.array(getattr(self, name), dtype=float))
-        x = self.x_m
-        if x.ndim != 1 or x.size < 2:
-            raise ValueError('RoadProfile.x_m must be 1-D with at least 2 samples')
-        if np.shape(self.z_left_m) != x.shape or np.shape(self.z_right_m) != x.shape:
-            raise ValueError('RoadProfile z arrays must have the shape of x_m')
-        if not np.all(np.diff(x) > 0):
-            raise ValueError('RoadProfile.x_m must be strictly increasing')
-        if not (np.all(np.isfinite(self.z_left_m)) and np.all(np.isfinite(self.z_right_m))):
-            raise ValueError('RoadProfile elevations contain NaN or inf')
-
-    @property
-    def length_m(self) -> float:
-        """Road length x_end - x_start, m."""
-        return float(self.x_m[-1] - self.x_m[0])
-
-    def centreline(self) -> np.ndarray:
-        """Return the left/right average (z_left + z_right)/2 in m, shape (n,).
-
-        Used by the pitch-plane ride model [P section 6.2].
-        """
-        return 0.5 * (np.asarray(self.z_left_m) + np.asarray(self.z_right_m))
-
-    def _track(self, side: str) -> np.ndarray:
-        side = _check_side(side)
-        if side == 'left':
-            return np.asarray(self.z_left_m)
-        if side == 'right':
-            return np.asarray(self.z_right_m)
-        return self.centreline()
-
-    def _check_x(self, x_m: np.ndarray) -> np.ndarray:
-        x = np.asarray(x_m, dtype=float)
-        if np.any(np.isnan(x)):
-            raise ValueError('road position contains NaN')
-        lo, hi = self.x_m[0], self.x_m[-1]
-        if np.any(x < lo) or np.any(x > hi):
-            raise ValueError(
-                f'road position outside the profile [{lo}, {hi}] m: '
-                f'min {np.min(x):.6g}, max {np.max(x):.6g}'
-            )
-        return x
-
-    def elevation(self, x_m: np.ndarray, side: str = 'left') -> np.ndarray:
-        """Return the elevation at positions ``x_m`` by linear interpolation.
-
-        Parameters
-        ----------
-        x_m : array_like
-            Positions along the road, m, any shape, inside [x_m[0], x_m[-1]].
-        side : str
-            'left', 'right' or 'centre'.
-
-        Returns
-        -------
-        np.ndarray
-            Elevation in m, shape of ``x_m``.
-        """
-        return np.interp(self._check_x(x_m), self.x_m, self._track(side))
-
-    def slope(self, x_m: np.ndarray, side: str = 'left') -> np.ndarray:
-        """Return dz/dx at positions ``x_m`` (piecewise constant between samples).
-
-        Multiply by the forward speed to get the road's vertical velocity (m/s), e.g.
-        for tyre damping.
-
-        Parameters
-        ----------
-        x_m : array_like
-            Positions along the road, m.
-        side : str
-            'left', 'right' or 'centre'.
-
-        Returns
-        -------
-        np.ndarray
-            Slope, dimensionless, shape of ``x_m``.
-        """
-        x = self._check_x(x_m)
-        xs = np.asarray(self.x_m, dtype=float)
-        seg = np.diff(self._track(side)) / np.diff(xs)
-        i = np.clip(np.searchsorted(xs, x, side='right') - 1, 0, seg.size - 1)
-        return seg[i]
-
-    def sample(self, distance_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Return the left and right elevations at ``distance_m`` (linear interpolation).
-
-        Parameters
-        ----------
-        distance_m : array_like
-            Positions along the road, m, any shape (e.g. x0 + v t for a time grid).
-
-        Returns
-        -------
-        (np.ndarray, np.ndarray)
-            z_left, z_right in m, each of the shape of ``distance_m``.
-        """
-        x = self._check_x(distance_m)
-        return (
-            np.interp(x, self.x_m, self.z_left_m),
-            np.interp(x, self.x_m, self.z_right_m),
-        )
-
-
 def _ramp(x: np.ndarray, ramp_m: float) -> np.ndarray:
     if ramp_m <= 0:
         return np.ones_like(x)
@@ -822,3 +690,26 @@ def discrete_bump(
     zl = z if side in ('both', 'left') else np.zeros_like(z)
     zr = z if side in ('both', 'right') else np.zeros_like(z)
     return RoadProfile(x_m=x, z_left_m=zl, z_right_m=zr)
+
+
+def road_identity(road: str) -> dict[str, str]:
+    """What identifies a road a goal names: its text and, for a road file, file and SHA-256.
+
+    Empty for ``''`` (the configured road, which the model fingerprint covers).  What
+    the run configuration records and the calibration's cache key holds.
+
+    Raises
+    ------
+    ValueError
+        An unknown road name or a bad entry.
+    """
+    if not road:
+        return {}
+    from .road_files import FileRoadSpec, file_sha256
+
+    spec = resolve_road(road)
+    out = {'road': str(road)}
+    if isinstance(spec, FileRoadSpec):
+        out['file'] = spec.file
+        out['sha256'] = file_sha256(spec.file) if spec.path.is_file() else 'missing'
+    return out

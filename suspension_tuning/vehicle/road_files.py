@@ -64,7 +64,7 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from .road import RoadProfile
+from .road_profile import RoadProfile
 
 FORMATS = ('auto', 'crg', 'csv')
 #: The unit every distance and elevation of a road file must have.
@@ -575,29 +575,6 @@ def file_sha256(path: str | Path) -> str:
         for block in iter(lambda: f.read(1 << 20), b''):
             h.update(block)
     return h.hexdigest()
-
-
-def road_identity(road: str) -> dict[str, str]:
-    """What identifies a road a goal names: its text and, for a road file, file and SHA-256.
-
-    Empty for ``''`` (the configured road, which the model fingerprint covers).  What
-    the run configuration records and the calibration's cache key holds.
-
-    Raises
-    ------
-    ValueError
-        An unknown road name or a bad entry.
-    """
-    if not road:
-        return {}
-    from .road import resolve_road
-
-    spec = resolve_road(road)
-    out = {'road': str(road)}
-    if isinstance(spec, FileRoadSpec):
-        out['file'] = spec.file
-        out['sha256'] = file_sha256(spec.file) if spec.path.is_file() else 'missing'
-    return out
 
 
 # ---------------------------------------------------------------------- writing
