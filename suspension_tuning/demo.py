@@ -26,15 +26,10 @@ import numpy as np  # noqa: E402
 
 
 def baseline_design(n_vars: int) -> np.ndarray:
-    """The standard vehicle's settings (config/scenarios.yaml) as a normalised design."""
-    from suspension_tuning.vehicle.design import AxleSettings, from_physical
-    from suspension_tuning.vehicle.params import load_scenarios_config
+    """The baseline vehicle's settings (config/design_space.yaml) as a normalised design."""
+    from suspension_tuning.vehicle.design import load_design_space
 
-    base = load_scenarios_config()['baseline_design']
-    gas = float(base['gas_volume_l']) * 1e-3
-    settings = AxleSettings(*(np.array([v]) for v in (float(base['dpsf']), gas,
-                                                       float(base['dpsf']), gas)))
-    return from_physical(settings, n_vars)[0]
+    return load_design_space().baseline_x(n_vars)
 
 
 def optimiser_stopped(message: str) -> bool:
