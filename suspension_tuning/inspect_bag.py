@@ -580,6 +580,7 @@ def _metrics_plot(out: Path, metrics: dict[str, dict[str, float]], reported_labe
                 ax.annotate(f'{h:.3g}', (i, h), ha='center', va='bottom', fontsize=8)
         ax.set_title(label, fontsize=9)
         ax.set_ylabel(unit)
+        ax.margins(y=0.15)
     for ax in axes.ravel()[len(names):]:
         ax.set_visible(False)
     fig.suptitle('physical metrics: baseline and reported design')
