@@ -476,6 +476,10 @@ def write_plots(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]) -
                     for q in (s[1].orientation for s in samples)
                 ]
                 ax.plot(t, roll, label='roll deg')
+            elif first is not None and hasattr(first, 'vector'):  # Vector3Stamped: attitude
+                for axis, label in (('x', 'roll deg'), ('y', 'pitch deg')):
+                    ax.plot(t, [math.degrees(getattr(s[1].vector, axis)) for s in samples],
+                            label=label)
             elif first is not None and hasattr(first, 'accel'):  # AccelStamped: a seat
                 ax.plot(t, [s[1].accel.linear.z for s in samples], label='a_z m/s^2')
             elif first is not None and hasattr(first, 'name'):
