@@ -434,6 +434,12 @@ class DesignSpace:
             Every name of :meth:`names` (``dpsf``, ``gas_volume_l`` for 2 variables;
             ``dpsf_front``, ``gas_volume_front_l``... for 4) to its value.
 
+        Returns
+        -------
+        np.ndarray
+            x by eq. 4; a value at the low end of its range (x = 0) is taken as the
+            paper's lower bound x = 0.001 (eqs. 6, 8).
+
         Raises
         ------
         ValueError
