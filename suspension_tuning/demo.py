@@ -5,8 +5,10 @@ recorder) in this process on loopback DDS, then runs the 4-variable ride optimis
 and the 4-variable handling optimisation with simplified-model gradients (each starts
 with the eq. 25 calibration from 30 full-model samples, cached across runs).  Prints the
 progress of each iteration, the best feasible design seen (or says plainly that none
-was feasible) in physical units beside the baseline vehicle, where the bags are and
-the plots written from them, and the wall time.
+was feasible) in physical units beside the baseline vehicle, with the physical metrics
+of both (seat W_b RMS in m/s^2, first roll peak in deg, roll-rate RMS in deg/s, tyre
+lift-off time in %), where the bags are and the plots written from them, and the wall
+time.
 """
 
 from __future__ import annotations
@@ -43,25 +45,30 @@ def optimiser_stopped(message: str) -> bool:
     return stop_message(message).removesuffix(' (last iterate infeasible)') in own
 
 
-def report(scenario: str, result, baseline_f: float, baseline_x: np.ndarray) -> str:
+def report(scenario: str, result) -> str:
     """The reported design (the best feasible one seen) beside the baseline, physical units.
 
-    When no iterate was feasible the report says so plainly and shows the least
-    violating design in the column of the optimum.
+    The baseline is the result's (config/design_space.yaml), with the physical metrics
+    of both designs.  When no iterate was feasible the report says so plainly and shows
+    the least violating design in the column of the optimum.
     """
-    from suspension_tuning.tuning import physical_settings
+    from suspension_tuning.physical_metrics import metric_lines
 
-    base = physical_settings(baseline_x)
+    base = dict(zip(result.physical_names, result.baseline_physical_values))
+    baseline_f = result.baseline_f if len(result.baseline_x) else float('nan')
     column, w = ('optimum', 10) if result.feasible else ('least violating', 17)
     lines = [f'{scenario}: {result.message}',  # which iteration, or that none was feasible
              f'  {"setting":<22}{"baseline":>10}{column:>{w}}']
     for name, value in zip(result.physical_names, result.physical_values):
-        lines.append(f'  {name:<22}{base[name]:>10.3f}{value:>{w}.3f}')
+        lines.append(f'  {name:<22}{base.get(name, float("nan")):>10.3f}{value:>{w}.3f}')
     gain = 100.0 * (baseline_f - result.f) / abs(baseline_f) if baseline_f else float('nan')
     lines.append(f'  {"objective f":<22}{baseline_f:>10.4f}{result.f:>{w}.4f}'
                  f'   (improvement {gain:.1f} %)')
     lines.append(f'  largest constraint g  {max(result.g, default=0.0):.3f} (<= 0 feasible, '
                  f'eq. 11)')
+    names = list(result.metric_names)
+    lines += metric_lines(dict(zip(names, result.baseline_metrics)),
+                          dict(zip(names, result.metrics)), column)
     lines.append(f'  iterations {result.iterations}, full-model runs {result.n_full_runs}, '
                  f'simplified runs {result.n_simplified_runs}, calibration runs '
                  f'{result.n_calibration_runs or "0 (eq. 25 scaling from the cache)"}, '
@@ -83,7 +90,6 @@ def main(argv: list[str] | None = None) -> int:
     from rclpy.node import Node
     from rclpy.parameter import Parameter
     from suspension_tuning_interfaces.action import Optimise
-    from suspension_tuning_interfaces.srv import EvaluateDesign
 
     from suspension_tuning.graph import SpinningGraph, build_nodes
     from suspension_tuning.inspect_bag import write_plots
@@ -100,19 +106,15 @@ def main(argv: list[str] | None = None) -> int:
     status = 0
     try:
         action = ActionClient(client_node, Optimise, '/coordinator/optimise')
-        evaluate = client_node.create_client(EvaluateDesign, '/full_vehicle_sim/evaluate')
-        if not (action.wait_for_server(timeout_sec=30) and evaluate.wait_for_service(30)):
+        if not action.wait_for_server(timeout_sec=30):
             print('demo: the graph did not come up', file=sys.stderr)
             return 1
         print(f'graph up: {", ".join(n.get_name() for n in nodes)} '
               f'(ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]}, loopback only)', flush=True)
         outputs = []
         for scenario in args.scenarios:
-            x_base = baseline_design(args.n_vars)
-            base = wait_future(evaluate.call_async(EvaluateDesign.Request(
-                scenario=scenario, n_vars=args.n_vars, designs=x_base.tolist())), 600)
-            print(f'\n== {scenario}: {args.n_vars} variables, simplified-model gradients '
-                  f'(baseline f = {base.f[0]:.4f})', flush=True)
+            print(f'\n== {scenario}: {args.n_vars} variables, simplified-model gradients',
+                  flush=True)
             closed_before = len(recorder.session.closed_bags)
             handle = wait_future(action.send_goal_async(
                 Optimise.Goal(scenario=scenario, n_vars=args.n_vars,
@@ -131,10 +133,10 @@ def main(argv: list[str] | None = None) -> int:
                 time.sleep(0.1)
             bag = recorder.session.closed_bags[-1]
             plots = write_plots(bag, bag / 'plots')
-            outputs.append((scenario, result, base.f[0], x_base, bag, plots))
+            outputs.append((scenario, result, bag, plots))
         print()
-        for scenario, result, base_f, x_base, bag, plots in outputs:
-            print(report(scenario, result, base_f, x_base))
+        for scenario, result, bag, plots in outputs:
+            print(report(scenario, result))
             print(f'  bag: {bag}')
             print(f'  plots: {", ".join(str(p) for p in plots)}')
             print(f'  inspect: .venv/bin/inspect_bag {bag}')

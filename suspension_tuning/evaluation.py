@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from suspension_tuning.metric_names import METRIC_NAMES, TYRES  # noqa: F401
-from suspension_tuning.vehicle.design import VARIABLE_NAMES, validate_design
+from suspension_tuning.vehicle.design import VARIABLE_NAMES, DesignSpace, validate_design
 from suspension_tuning.vehicle.mixed import run_mixed
 from suspension_tuning.vehicle.params import (
     load_scenarios_config,
@@ -117,7 +117,9 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
         (:func:`~suspension_tuning.vehicle.road.resolve_road`); '' = the configured one.
         The handling scenario runs on its smooth road whatever this says.
     **kwargs
-        Passed to :func:`suspension_tuning.vehicle.scenarios.run_scenario`.
+        Passed to :func:`suspension_tuning.vehicle.scenarios.run_scenario` (or
+        :func:`~suspension_tuning.vehicle.mixed.run_mixed`): ``params``, ``space`` (the
+        design space, default config/design_space.yaml)...
     """
     if integrator is not None:
         params = kwargs.get('params') or load_vehicle_params()
@@ -135,13 +137,15 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
                             metric_names=names, metrics=table, result=result)
 
 
-def in_process_model(scenario: str, integrator: str | None = None) -> Callable[[Array], Any]:
+def in_process_model(scenario: str, integrator: str | None = None,
+                     space: DesignSpace | None = None) -> Callable[[Array], Any]:
     """The full model of ``scenario`` in-process, as ``tuning.optimise`` calls it.
 
     Returns a callable designs (m, n) -> ``tuning.FullEvaluation`` with the named
     metrics (what extra constraints bound) and the scenario result as the simplified
     model's inputs; 'mixed' runs with in-process valve controllers.  ``integrator``:
-    'fixed_step' or 'variable_step' (None or '': config/vehicle.yaml's).
+    'fixed_step' or 'variable_step' (None or '': config/vehicle.yaml's).  ``space``:
+    the design space (default config/design_space.yaml).
     """
     from suspension_tuning.tuning import FullEvaluation
 
@@ -150,7 +154,7 @@ def in_process_model(scenario: str, integrator: str | None = None) -> Callable[[
 
     def run(designs: Array) -> FullEvaluation:
         result = evaluate(scenario, np.atleast_2d(np.asarray(designs, dtype=float)),
-                          integrator=integrator or None)
+                          integrator=integrator or None, space=space)
         return FullEvaluation(f=result.f, g=result.g, inputs=result.result,
                               metric_names=result.metric_names, metrics=result.metrics)
 

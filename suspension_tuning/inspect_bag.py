@@ -11,15 +11,20 @@
   reported design (x, f, g, physical values): the best feasible iterate with its
   iteration, or, saying so plainly, the least violating one when none was feasible
   (for a result recorded before results named it: found in the recorded history), the
-  evaluation counts, and the requests seen on the service-event topics;
+  baseline design, the physical metrics of both (seat W_b RMS in m/s^2, first roll
+  peak in deg, roll-rate RMS in deg/s, lift-off time per tyre in %), the evaluation
+  counts, and the requests seen on the service-event topics;
 * valve switching events from ``/suspension/valve_command`` and
   ``/suspension/valve_state``: the simulated time of each change of the commanded
   state and the delay until the actual state reached it (paper section 3: 50-100 ms).
 
 ``--plots DIR`` writes PNG files: ``convergence.png`` (f and the largest violation vs
-iteration, the reported design marked), ``design.png`` (each x component vs iteration,
-and the x1-x2 plane with the reported design and the last iterate), ``telemetry.png``
-(the last run's ``/<sim>/telemetry/*`` streams vs simulated time).
+iteration, the reported design marked), ``design.png`` (each design variable vs
+iteration in physical units, and the plane of the first two with the reported design,
+the last iterate and the baseline), ``metrics.png`` (the physical metrics of the
+baseline and the reported design), ``telemetry.png`` (the last run's
+``/<sim>/telemetry/*`` streams vs simulated time).  Names and units are those of the
+design space the run used (the run configuration's config/design_space.yaml).
 
 :func:`last_iteration` returns what :class:`suspension_tuning.optim.dynamic_q.DynamicQ`
 needs to resume the optimisation (``history=``).  Everything here is plain Python
@@ -51,6 +56,8 @@ from suspension_tuning.bag.history import (  # noqa: F401 (inspect_bag's names b
     last_iteration,
 )
 from suspension_tuning.bag.reader import BagContents, decode, read_messages, reindex
+from suspension_tuning.physical_metrics import metric_lines
+from suspension_tuning.vehicle.design import DESIGN_SPACE_FILE, DesignSpace, load_design_space
 
 VALVE_COMMAND_TOPIC = '/suspension/valve_command'
 VALVE_STATE_TOPIC = '/suspension/valve_state'
@@ -68,6 +75,24 @@ def _run_config(contents: BagContents) -> dict[str, Any] | None:
     text = contents.metadata.get('run_config', {}).get('yaml', '')
     config = yaml.safe_load(text) if text else None
     return config if isinstance(config, dict) else None
+
+
+def design_space(contents: BagContents) -> DesignSpace:
+    """The design space of the bag's run: its configuration's design_space.yaml.
+
+    A bag recorded before the design space was configurable ran the paper's ranges,
+    which the shipped config/design_space.yaml holds; that is used then, and for a bag
+    without a run configuration.
+    """
+    config = _run_config(contents) or {}
+    files = config.get('vehicle_configuration') or {}
+    if isinstance(files, dict) and isinstance(files.get(DESIGN_SPACE_FILE), dict):
+        try:
+            return DesignSpace.from_mapping(files[DESIGN_SPACE_FILE],
+                                            f'the run configuration\'s {DESIGN_SPACE_FILE}')
+        except ValueError:
+            pass
+    return load_design_space()
 
 
 def run_gtol(config: dict[str, Any] | None) -> float:
@@ -93,11 +118,16 @@ def optimum(contents: BagContents) -> dict[str, Any] | None:
     Dynamic-Q's rule, with the run's gtol (:func:`run_gtol`), and ``gtol`` says
     which.  A result without a design (a failed run) has ``best_iteration`` None.
     ``last_iterate``: iteration, x, f and max_violation of the run's last record.
+    ``baseline``: x, f and the physical values of the baseline design (None in a result
+    recorded without it); ``physical_metrics``: ``reported`` and ``baseline``, each
+    metric name (unit in the name, :mod:`suspension_tuning.physical_metrics`) -> value.
     """
     msg = _result_message(contents)
     if msg is None:
         return None
     history = [_record(r) for r in msg.history]
+    names = [str(n) for n in getattr(msg, 'metric_names', [])]
+    baseline_x = [float(v) for v in getattr(msg, 'baseline_x', [])]
     out = {
         'success': bool(msg.success),
         'message': str(msg.message),
@@ -117,22 +147,31 @@ def optimum(contents: BagContents) -> dict[str, Any] | None:
         'n_calibration_runs': int(msg.n_calibration_runs),
         'history': history,
         'wall_time_s': float(msg.wall_time_s),
+        'baseline': None if not baseline_x else {
+            'x': baseline_x, 'f': float(msg.baseline_f),
+            'physical': dict(zip([str(n) for n in msg.physical_names],
+                                 [float(v) for v in msg.baseline_physical_values]))},
+        'physical_metrics': {
+            'reported': dict(zip(names, [float(v) for v in getattr(msg, 'metrics', [])])),
+            'baseline': dict(zip(names, [float(v) for v in
+                                         getattr(msg, 'baseline_metrics', [])]))},
     }
     records = history or iterations(contents)
     if not out['x']:  # the run failed before it had a design to report
         out.update(feasible=False, best_iteration=None, max_violation=None)
     elif not hasattr(msg, 'best_iteration'):
-        out.update(_best_of_history(records, run_gtol(_run_config(contents))))
+        out.update(_best_of_history(records, run_gtol(_run_config(contents)),
+                                    design_space(contents)))
     last = records[-1] if records else None
     out['last_iterate'] = None if last is None else {
         k: last[k] for k in ('iteration', 'x', 'f', 'max_violation')}
     return out
 
 
-def _best_of_history(records: list[dict[str, Any]], gtol: float) -> dict[str, Any]:
+def _best_of_history(records: list[dict[str, Any]], gtol: float,
+                     space: DesignSpace) -> dict[str, Any]:
     """The reported-design fields of :func:`optimum` from recorded iterates."""
     from suspension_tuning.reported_design import best_record
-    from suspension_tuning.tuning import physical_settings
 
     found = best_record(records, gtol)
     if found is None:
@@ -143,7 +182,7 @@ def _best_of_history(records: list[dict[str, Any]], gtol: float) -> dict[str, An
     return {'x': list(best['x']), 'f': best['f'], 'g': list(best['g']),
             'feasible': feasible, 'best_iteration': best['iteration'],
             'max_violation': best['max_violation'], 'source': 'history', 'gtol': gtol,
-            'physical': physical_settings(best['x'])}
+            'physical': space.physical_values(best['x'])}
 
 
 def service_requests(contents: BagContents) -> dict[str, dict[str, int]]:
@@ -257,7 +296,7 @@ def _last_run(samples: list[tuple[float, Any]]) -> list[tuple[float, Any]]:
 
 
 def write_plots(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]) -> list[Path]:
-    """Write convergence.png, design.png and telemetry.png (those the bag has data for)."""
+    """Write convergence.png, design.png, metrics.png, telemetry.png (those with data)."""
     import matplotlib
 
     matplotlib.use('Agg')
@@ -292,29 +331,12 @@ def write_plots(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]) -
         fig.savefig(out / 'convergence.png', dpi=100)
         plt.close(fig)
         written.append(out / 'convergence.png')
-        x = np.array([r['x'] for r in records], dtype=float)
-        fig, (ax_k, ax_p) = plt.subplots(1, 2, figsize=(10, 4))
-        for j in range(x.shape[1]):
-            ax_k.plot(k, x[:, j], 'o-', label=f'x{j + 1}')
-        ax_k.set_xlabel('iteration')
-        ax_k.set_ylabel('normalised design variable')
-        ax_k.legend()
-        if x.shape[1] >= 2:
-            ax_p.plot(x[:, 0], x[:, 1], 'o-')
-            ax_p.plot(x[-1, 0], x[-1, 1], 'X', markersize=10, color='tab:gray',
-                      label='last iterate')
-            if best and len(best['x']) == x.shape[1]:
-                ax_p.plot(best['x'][0], best['x'][1], '*', markersize=14, color='tab:green',
-                          label=label)
-            ax_p.set_xlabel('x1')
-            ax_p.set_ylabel('x2')
-            ax_p.set_xlim(0, 1)
-            ax_p.set_ylim(0, 1)
-            ax_p.legend()
-        fig.tight_layout()
-        fig.savefig(out / 'design.png', dpi=100)
-        plt.close(fig)
-        written.append(out / 'design.png')
+        written.append(_design_plot(out, records, best, label, design_space(contents),
+                                    result.get('baseline') if result else None))
+    metrics = (result or {}).get('physical_metrics') or {}
+    if metrics.get('reported') or metrics.get('baseline'):
+        written.append(_metrics_plot(out, metrics, 'optimum' if best and best['feasible']
+                                     else 'reported design'))
     telemetry = sorted(t for t in contents.topics() if '/telemetry/' in t)
     if telemetry:
         fig, axes = plt.subplots(
@@ -342,6 +364,10 @@ def write_plots(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]) -
                     for q in (s[1].orientation for s in samples)
                 ]
                 ax.plot(t, roll, label='roll deg')
+            elif first is not None and hasattr(first, 'vector'):  # Vector3Stamped: attitude
+                for axis, label in (('x', 'roll deg'), ('y', 'pitch deg')):
+                    ax.plot(t, [math.degrees(getattr(s[1].vector, axis)) for s in samples],
+                            label=label)
             elif first is not None and hasattr(first, 'accel'):  # AccelStamped: a seat
                 ax.plot(t, [s[1].accel.linear.z for s in samples], label='a_z m/s^2')
             elif first is not None and hasattr(first, 'name'):
@@ -365,6 +391,95 @@ def write_plots(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]) -
         plt.close(fig)
         written.append(out / 'telemetry.png')
     return written
+
+
+def _design_plot(out: Path, records: list[dict[str, Any]], best: dict[str, Any] | None,
+                 label: str, space: DesignSpace, baseline: dict[str, Any] | None) -> Path:
+    """design.png: each variable vs iteration (physical units), and the first two's plane.
+
+    The plane shows the reported design, the last iterate and the baseline.
+    """
+    import matplotlib.pyplot as plt
+
+    x = np.array([r['x'] for r in records], dtype=float)
+    n = x.shape[1]
+    try:
+        variables = space.variables(n)
+        names = space.names(n)
+    except ValueError:  # a design the space cannot show (another n): normalised values
+        variables, names = [], [f'x{j + 1}' for j in range(n)]
+
+    def physical(xs: np.ndarray) -> np.ndarray:
+        if not variables:
+            return np.atleast_2d(xs)
+        low, high = space.bounds(n)
+        factors = np.array([1.0 / v.factor for v, _ in variables])
+        return (low + np.atleast_2d(xs) * (high - low)) * factors
+
+    values = physical(x)
+    k = [r['iteration'] for r in records]
+    fig = plt.figure(figsize=(10, 1.6 * n + 1.2))
+    grid = fig.add_gridspec(n, 2)
+    for j in range(n):
+        ax = fig.add_subplot(grid[j, 0])
+        ax.plot(k, values[:, j], 'o-')
+        ax.set_ylabel(names[j], fontsize=8)
+        if j == n - 1:
+            ax.set_xlabel('iteration')
+    ax_p = fig.add_subplot(grid[:, 1])
+    ax_p.plot(values[:, 0], values[:, 1], 'o-')
+    ax_p.plot(values[-1, 0], values[-1, 1], 'X', markersize=10, color='tab:gray',
+              label='last iterate')
+    if best and len(best['x']) == n:
+        b = physical(np.asarray(best['x'], float))[0]
+        ax_p.plot(b[0], b[1], '*', markersize=14, color='tab:green', label=label)
+    if baseline and len(baseline['x']) == n:
+        b = physical(np.asarray(baseline['x'], float))[0]
+        ax_p.plot(b[0], b[1], 's', markersize=8, color='k', label='baseline')
+    if variables:
+        low, high = space.bounds(n)
+        ax_p.set_xlim(variables[0][0].in_unit(low[0]), variables[0][0].in_unit(high[0]))
+        ax_p.set_ylim(variables[1][0].in_unit(low[1]), variables[1][0].in_unit(high[1]))
+    ax_p.set_xlabel(names[0])
+    ax_p.set_ylabel(names[1])
+    ax_p.legend(fontsize=8)
+    fig.suptitle(f'design in physical units ({space.source})', fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out / 'design.png', dpi=100)
+    plt.close(fig)
+    return out / 'design.png'
+
+
+def _metrics_plot(out: Path, metrics: dict[str, dict[str, float]], reported_label: str
+                  ) -> Path:
+    """metrics.png: each physical metric of the baseline and the reported design."""
+    import matplotlib.pyplot as plt
+
+    from suspension_tuning.physical_metrics import LABELS
+
+    baseline, reported = metrics.get('baseline') or {}, metrics.get('reported') or {}
+    names = list(dict.fromkeys([*reported, *baseline]))
+    columns = min(3, len(names))
+    rows = -(-len(names) // columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 2.6 * rows),
+                             squeeze=False)
+    for ax, name in zip(axes.ravel(), names):
+        label, unit = LABELS.get(name, (name, ''))
+        heights = [baseline.get(name, math.nan), reported.get(name, math.nan)]
+        ax.bar(['baseline', reported_label], heights, color=['tab:gray', 'tab:green'])
+        for i, h in enumerate(heights):
+            if math.isfinite(h):
+                ax.annotate(f'{h:.3g}', (i, h), ha='center', va='bottom', fontsize=8)
+        ax.set_title(label, fontsize=9)
+        ax.set_ylabel(unit)
+        ax.margins(y=0.15)
+    for ax in axes.ravel()[len(names):]:
+        ax.set_visible(False)
+    fig.suptitle('physical metrics: baseline and reported design')
+    fig.tight_layout()
+    fig.savefig(out / 'metrics.png', dpi=100)
+    plt.close(fig)
+    return out / 'metrics.png'
 
 
 # ------------------------------------------------------------------------ CLI
@@ -392,6 +507,15 @@ def _format_optimum(best: dict[str, Any]) -> list[str]:
     if last and last['iteration'] != k:
         lines.append(f'  last iterate: iteration {last["iteration"]}, f = {last["f"]!r}, '
                      f'max violation {last["max_violation"]:.4g}')
+    base = best.get('baseline')
+    if base:
+        lines.append(f'baseline design: f = {base["f"]!r}, x = {base["x"]}')
+        lines += [f'  {name} = {value:g}' for name, value in base['physical'].items()]
+    metrics = best.get('physical_metrics') or {}
+    if metrics.get('reported') or metrics.get('baseline'):
+        lines.append('physical metrics:')
+        lines += metric_lines(metrics.get('baseline', {}), metrics.get('reported', {}),
+                              'optimum' if best['feasible'] else 'reported')
     return lines
 
 

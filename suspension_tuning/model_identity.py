@@ -9,8 +9,10 @@ worker's answers:
 - for an FMU: the SHA-256 of the file and its mapping (parsed, so comments and layout
   do not count; the mapping holds the fixed parameters and start values the worker
   sets);
-- the configuration files the worker reads (``WORKER_CONFIG_FILES``: vehicle, strut,
-  tyre, road, scenarios, manoeuvre...) and the SHA-256 of every file a road of
+- the configuration files the worker reads (``WORKER_CONFIG_FILES``: the design space
+  (the worker turns normalised designs into physical settings with its ranges),
+  vehicle, strut, tyre, road, scenarios (with the normalisation of eqs. 9 and 10),
+  manoeuvre...) and the SHA-256 of every file a road of
   config/road.yaml names (key ``file``);
 - the built-in model's integrator (``fixed_step`` or ``variable_step``).
 
@@ -37,6 +39,7 @@ FINGERPRINT_VERSION = 1
 FINGERPRINT_LENGTH = 16
 #: The configuration files a simulation worker's answers depend on.
 WORKER_CONFIG_FILES = (
+    'design_space.yaml',
     'vehicle.yaml',
     'strut_4s4.yaml',
     'tyre.yaml',

@@ -21,13 +21,19 @@ One recorded full-model run of a design instead of an optimisation (any scenario
 
     tune --scenario mixed --evaluate --x0 0.5 0.5
 
+A start point in physical units, by the names of config/design_space.yaml::
+
+    tune --scenario ride --n-vars 2 --start dpsf=1.2 gas_volume_l=0.35
+
 Prints the eq. 25 calibration's progress (full-model samples done of total; the first
 run of a model configuration spends them before its first iteration), then one line
 per Dynamic-Q iteration (iteration, f, largest violation, model runs so far) from the
 action's feedback, then the result: the best feasible design seen as the optimum, with
-its iteration, in physical units (damper scale factor, gas volume in litres), or, when
-no iterate was feasible, "no feasible design found" and the least violating one.
-Ctrl-C cancels the goal and exits with status 130.
+its iteration, in physical units (the names and units of config/design_space.yaml), or,
+when no iterate was feasible, "no feasible design found" and the least violating one;
+then the baseline design and the physical metrics of both (seat W_b RMS in m/s^2,
+first roll peak in deg, roll-rate RMS in deg/s, lift-off time per tyre in %).  Ctrl-C
+cancels the goal and exits with status 130.
 """
 
 from __future__ import annotations
@@ -47,8 +53,10 @@ from suspension_tuning_interfaces.action import Optimise
 from suspension_tuning_interfaces.msg import Constraint
 
 from suspension_tuning.nodes._spin import wait_future
+from suspension_tuning.physical_metrics import metric_lines
 from suspension_tuning.reported_design import statement
 from suspension_tuning.tuning import ConstraintSpec
+from suspension_tuning.vehicle.design import DesignSpace, load_design_space
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
@@ -57,8 +65,14 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--scenario', default='ride',
                         help="'ride' or 'handling' ('mixed' too with --evaluate)")
     parser.add_argument('--n-vars', type=int, default=2, help='2 or 4 design variables')
-    parser.add_argument('--x0', type=float, nargs='*', default=[],
-                        help='normalised start point (default: centre of the design space)')
+    start = parser.add_mutually_exclusive_group()
+    start.add_argument('--x0', type=float, nargs='*', default=[],
+                       help='normalised start point (default: centre of the design space)')
+    start.add_argument('--start', nargs='+', default=[], metavar='NAME=VALUE',
+                       help='start point in physical units by name, e.g. dpsf=1.2 '
+                            'gas_volume_l=0.35 (2 variables) or dpsf_front=... '
+                            'gas_volume_front_l=... dpsf_rear=... gas_volume_rear_l=... '
+                            '(4): the names and units of config/design_space.yaml')
     parser.add_argument('--gradient', default='simplified', help="'simplified' or 'full'")
     parser.add_argument('--max-iterations', type=int, default=0, help='0 = coordinator default')
     parser.add_argument('--move-limit', type=float, default=0.0, help='0 = coordinator default')
@@ -106,6 +120,31 @@ def goal_road(road: str, repeat: bool = False) -> str:
         raise ValueError(f'--repeat-road applies to a road file; {road!r} is a road of '
                          'config/road.yaml, whose entry says repeat: true')
     return road
+
+
+def start_point(texts: list[str], n_vars: int, space: DesignSpace | None = None) -> list[float]:
+    """The normalised start point of ``--start NAME=VALUE ...`` (physical units).
+
+    Raises
+    ------
+    ValueError
+        A malformed entry, a name given twice, a missing or unknown name, or a value
+        outside its range (config/design_space.yaml).
+    """
+    values: dict[str, float] = {}
+    for text in texts:
+        name, sep, value = text.partition('=')
+        if not sep:
+            raise ValueError(f'--start {text!r}: expected NAME=VALUE, e.g. dpsf=1.2')
+        try:
+            number = float(value)
+        except ValueError:
+            raise ValueError(f'--start {text!r}: {value!r} is not a number') from None
+        if name.strip() in values:
+            raise ValueError(f'--start: {name.strip()} given twice')
+        values[name.strip()] = number
+    space = space if space is not None else load_design_space()
+    return space.x_from_values(values, n_vars).tolist()
 
 
 def format_feedback(feedback: Optimise.Feedback) -> str:
@@ -166,6 +205,18 @@ def format_result(result) -> str:
                      'least violating design in physical units (not feasible):')
         lines += [f'  {name}: {value:.4g}'
                   for name, value in zip(result.physical_names, result.physical_values)]
+        if len(result.baseline_x):
+            lines.append(f'baseline design (config/design_space.yaml): f = '
+                         f'{result.baseline_f:.6f}')
+            lines += [f'  {name}: {value:.4g}' for name, value in
+                      zip(result.physical_names, result.baseline_physical_values)]
+    if len(result.metric_names):
+        names = list(result.metric_names)
+        lines.append('physical metrics:')
+        title = ('this design' if not len(result.baseline_x) else
+                 'optimum' if result.feasible else 'least violating')
+        lines += metric_lines(dict(zip(names, result.baseline_metrics)),
+                              dict(zip(names, result.metrics)), title)
     return '\n'.join(lines)
 
 
@@ -208,6 +259,7 @@ def main(argv: list[str] | None = None) -> int:
     try:  # checked here too, so that a typo is reported before any ROS set-up
         constraints = [ConstraintSpec.parse(text) for text in args.constraint]
         road = goal_road(args.road, args.repeat_road)
+        x0 = start_point(args.start, args.n_vars) if args.start else args.x0
     except ValueError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
@@ -226,7 +278,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f'error: no action server {args.action} within {args.server_timeout} s',
                   file=sys.stderr)
             return 2
-        goal = Optimise.Goal(scenario=args.scenario, n_vars=args.n_vars, x0=args.x0,
+        goal = Optimise.Goal(scenario=args.scenario, n_vars=args.n_vars, x0=x0,
                              gradient_source='evaluate' if args.evaluate else args.gradient,
                              max_iterations=args.max_iterations, move_limit=args.move_limit,
                              constraints=[Constraint(scenario=c.scenario, quantity=c.quantity,

@@ -47,7 +47,8 @@ from suspension_tuning.vehicle.design import (
     VARIABLE_NAMES,
     X_LOWER,
     X_UPPER,
-    to_physical,
+    DesignSpace,
+    load_design_space,
     validate_design,
 )
 from suspension_tuning.vehicle.params import INTEGRATORS
@@ -349,24 +350,24 @@ class TuningRequest:
                 and c.has_simplified_model else 'full' for c in self.constraints]
 
 
-def physical_settings(x: ArrayLike) -> dict[str, float]:
-    """Physical 4S4 settings of one normalised design, units at the edge (litres).
+def physical_settings(x: ArrayLike, space: DesignSpace | None = None) -> dict[str, float]:
+    """Physical settings of one normalised design by name, units at the edge.
 
     Parameters
     ----------
     x : array_like, shape (2,) or (4,)
         Normalised design (eqs. 4-8).
+    space : DesignSpace, optional
+        The design space (default config/design_space.yaml).
 
     Returns
     -------
     dict
-        ``dpsf_front``, ``gas_volume_front_l``, ``dpsf_rear``, ``gas_volume_rear_l``.
+        The four per-axle names of the design space with their units
+        (``dpsf_front``, ``gas_volume_front_l``, ``dpsf_rear``, ``gas_volume_rear_l`` for
+        the paper's), each value in its variable's unit.
     """
-    axles = to_physical(np.asarray(x, dtype=float))
-    return {'dpsf_front': float(axles.dpsf_front[0]),
-            'gas_volume_front_l': float(axles.gas_volume_front_m3[0]) * 1e3,
-            'dpsf_rear': float(axles.dpsf_rear[0]),
-            'gas_volume_rear_l': float(axles.gas_volume_rear_m3[0]) * 1e3}
+    return (space if space is not None else load_design_space()).physical_values(x)
 
 
 def centre(n_vars: int) -> Array:
@@ -423,7 +424,9 @@ def optimise(request: TuningRequest, full_model: FullModel,
         ``value - bound`` of each extra constraint.  ``x`` is the last iterate; the
         answer to report is the best point (``x_best``, ``f_best``, ``g_best``,
         ``best_iteration``, ``best_feasible`` and ``constraint_values_best``; see
-        :func:`~suspension_tuning.optim.dynamic_q.dynamic_q`).
+        :func:`~suspension_tuning.optim.dynamic_q.dynamic_q`).  Every history record
+        whose full run returned named metrics holds them (``metrics``: name -> value,
+        the objective scenario's), and ``metrics_best`` those of the reported design.
     """
     if request.gradient_source == 'simplified' and simplified_gradient is None:
         raise ValueError("gradient source 'simplified' needs a simplified_gradient")
@@ -478,9 +481,17 @@ def optimise(request: TuningRequest, full_model: FullModel,
         except RunCancelled:
             opt.stop('cancelled')
             break
+        if record is not None and 'metrics' not in record:
+            metrics = terms.metrics.get(np.asarray(record['x'], float).tobytes())
+            if metrics is not None:
+                record['metrics'] = metrics
         if record is not None and callback is not None and callback(record, counter):
             opt.stop('cancelled')
     result = opt.result()
+    for rec in result.history:  # records the loop above did not see (several in one tell)
+        metrics = terms.metrics.get(np.asarray(rec['x'], float).tobytes())
+        if metrics is not None and 'metrics' not in rec:
+            rec['metrics'] = metrics
     k = len(request.constraints)
 
     def constraint_values(g: ArrayLike) -> list[float]:
@@ -494,6 +505,11 @@ def optimise(request: TuningRequest, full_model: FullModel,
                   constraint_gradient_sources=request.constraint_gradient_sources())
     if 'g_best' in result:
         result.update(constraint_values_best=constraint_values(result.g_best))
+        best = next((r for r in result.history if r['iteration'] == result.best_iteration), {})
+        metrics = best.get('metrics') or terms.metrics.get(
+            np.asarray(result.x_best, float).tobytes())
+        if metrics is not None:
+            result.update(metrics_best=dict(metrics))
     result.update(correction=correction.summary() if correction is not None
                   else {'method': 'none'})
     return result
@@ -535,6 +551,9 @@ class _ConstraintTerms:
                 self.gradients[spec.scenario] = gradient
         self.sources = sources
         self.inputs: dict[str, Any] = {}
+        #: Named metrics of the objective scenario's run at each evaluated design (keyed
+        #: by x's bytes), when its full model returns them.
+        self.metrics: dict[bytes, dict[str, float]] = {}
 
     def _run(self, scenario: str, points: Array) -> FullEvaluation:
         evaluation = self.models[scenario](points)
@@ -553,6 +572,10 @@ class _ConstraintTerms:
         for name, run in runs.items():
             self.inputs[name] = run.inputs
         primary = runs[self.request.scenario]
+        if primary.metrics is not None and len(primary.metric_names):
+            self.metrics[np.asarray(x, float).tobytes()] = {
+                str(name): float(value)
+                for name, value in zip(primary.metric_names, np.asarray(primary.metrics)[0])}
         g = np.concatenate([np.asarray(primary.g[0], float), self._constraint_values(runs)[0]])
         return float(primary.f[0]), g
 

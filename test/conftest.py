@@ -101,8 +101,9 @@ def fmus(tmp_path_factory) -> dict[str, str]:
     a road of its own, declared units), ``failing`` (FMI 2.0, fails mid-run for some
     designs), ``faulty`` (FMI 2.0, raises, returns NaN, hangs, segfaults or exits its
     process mid-run for some designs), ``defender`` (FMI 2.0, the product's own full
-    model behind FMI) and ``half_car`` (FMI 2.0, a vehicle with names and units of its
-    own: cm^3, one road input per axle, no declared units).
+    model behind FMI), ``half_car`` (FMI 2.0, a vehicle with names and units of its
+    own: cm^3, one road input per axle, no declared units) and ``coil`` (FMI 2.0, a
+    coil-sprung vehicle: spring rates in N/mm, damping coefficients in N s/m).
     """
     from pythonfmu.builder import FmuBuilder
     from pythonfmu3.builder import FmuBuilder as Fmu3Builder
@@ -125,4 +126,6 @@ def fmus(tmp_path_factory) -> dict[str, str]:
         'defender': str(FmuBuilder.build_FMU(source('DefenderFmu.py'), dest=dest)),
         'half_car': str(FmuBuilder.build_FMU(source('HalfCarRide.py'), dest=dest,
                                              project_files=plate)),
+        'coil': str(FmuBuilder.build_FMU(source('CoilRide.py'), dest=dest,
+                                         project_files=plate)),
     }

@@ -1,8 +1,6 @@
 """The demo: its exit status (an optimiser's own stop is a result, anything else a failure)
 and its report of the reported design."""
 
-import numpy as np
-
 from suspension_tuning.demo import optimiser_stopped
 
 
@@ -42,11 +40,30 @@ def test_demo_report_says_when_no_design_was_feasible():
         'violating one (max g = 0.0444), iteration 4; Dynamic-Q stopped: maximum number of '
         'iterations reached (last iterate infeasible)', x=[0.5, 0.5, 0.5, 0.5], f=0.1,
         g=[0.0444, -0.1, -0.1, -0.1], feasible=False, best_iteration=4, max_violation=0.0444,
-        physical_names=names, physical_values=[1.5, 0.35, 1.5, 0.35], iterations=30)
-    base_x = np.full(4, 0.5005)  # the centre; only its physical settings are printed
-    text = report('ride', result, 0.2, base_x)  # baseline f 0.2: improvement 50 %
+        physical_names=names, physical_values=[1.5, 0.35, 1.5, 0.35], iterations=30,
+        baseline_x=[0.31, 0.4, 0.31, 0.4], baseline_f=0.2,  # baseline f 0.2: 50 % better
+        baseline_physical_values=[1.0, 0.3, 1.0, 0.3])
+    text = report('ride', result)
     assert 'ride: no feasible design found' in text
     assert 'least violating' in text.splitlines()[1] and 'optimum' not in text
     assert '(improvement 50.0 %)' in text
     result.feasible, result.message = True, 'best feasible design: iteration 4; Dynamic-Q ...'
-    assert 'optimum' in report('ride', result, 0.2, base_x).splitlines()[1]
+    assert 'optimum' in report('ride', result).splitlines()[1]
+
+
+def test_demo_report_shows_the_physical_metrics_of_the_baseline_and_the_optimum():
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning.demo import report
+
+    result = Optimise.Result(
+        message='best feasible design: iteration 2', f=0.1, g=[-0.5] * 4, feasible=True,
+        physical_names=['dpsf_front'], physical_values=[1.5], baseline_x=[0.31],
+        baseline_f=0.2, baseline_physical_values=[1.0],
+        metric_names=['a_rms_driver_mps2', 'tyre_lift_off_pct_rl'],
+        metrics=[1.25, 0.5], baseline_metrics=[1.5, 2.0])
+    lines = report('ride', result).splitlines()
+    seat = next(line for line in lines if 'seat W_b RMS, driver (m/s^2)' in line)
+    assert seat.split()[-2:] == ['1.500', '1.250']  # baseline, then the optimum
+    lift = next(line for line in lines if 'lift-off time RL (%)' in line)
+    assert lift.split()[-2:] == ['2.000', '0.500']

@@ -4,22 +4,24 @@ import numpy as np
 import pytest
 
 from suspension_tuning.vehicle.design import (
-    DPSF_RANGE,
-    GVOL_RANGE_M3,
     VARIABLE_NAMES,
     X_LOWER,
     X_UPPER,
     AxleSettings,
     from_physical,
+    load_design_space,
     to_physical,
     validate_design,
 )
 
 
-def test_constants_match_paper_section_5_1():
+def test_constants_and_the_shipped_design_space_match_paper_section_5_1():
     assert (X_LOWER, X_UPPER) == (0.001, 1.0)  # eqs. 6, 8
-    assert DPSF_RANGE == (0.1, 3.0)  # section 5.1: dpsf 0.1 to 3
-    assert GVOL_RANGE_M3 == (0.1e-3, 0.6e-3)  # section 5.1: 0.1 to 0.6 litres
+    space = load_design_space()  # config/design_space.yaml
+    for axle in ('front', 'rear'):
+        dpsf, gvol = space.damper.axle(axle), space.spring.axle(axle)
+        assert (dpsf.low, dpsf.high) == (0.1, 3.0)  # section 5.1: dpsf 0.1 to 3
+        assert (gvol.low, gvol.high) == (0.1e-3, 0.6e-3)  # section 5.1: 0.1 to 0.6 litres
     assert VARIABLE_NAMES[2] == ('dpsf', 'gvol')
     assert VARIABLE_NAMES[4] == ('dpsf_front', 'gvol_front', 'dpsf_rear', 'gvol_rear')
 

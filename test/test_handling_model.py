@@ -34,15 +34,18 @@ def _inputs(slip_deg=-0.3, duration_s=8.0, dt=0.004, steer=0.0):
         {'roll_moment_arm': 'roll_axis'},
     ],
 )
-def test_compiled_derivative_matches_numpy_reference(options):
+@pytest.mark.parametrize('spring', ['volume', 'stiffness'])
+def test_compiled_derivative_matches_numpy_reference(options, spring):
     # kernel (numba) and reference (strut.strut_force, tyre.pacejka89_lateral) implement
-    # the same eqs. 12-14 for every option; random states with roll up to 0.1 rad
+    # the same eqs. 12-14 for every option and both spring laws (the 4S4 gas spring, a
+    # coil spring of a design space whose spring is a stiffness, 20-80 kN/m); random
+    # states with roll up to 0.1 rad
     rng = np.random.default_rng(3)
     model = HandlingModel(P, options)
-    settings = AxleSettings(
-        rng.uniform(0.1, 3, 5), rng.uniform(1e-4, 6e-4, 5), rng.uniform(0.1, 3, 5),
-        rng.uniform(1e-4, 6e-4, 5),
-    )  # fmt: skip
+    springs = (1e-4, 6e-4) if spring == 'volume' else (20e3, 80e3)
+    settings = AxleSettings.of(
+        {'front': rng.uniform(0.1, 3, 5), 'rear': rng.uniform(0.1, 3, 5)},
+        {'front': rng.uniform(*springs, 5), 'rear': rng.uniform(*springs, 5)}, spring)
     ss = axle_strut_states(settings, P)
     Pv = model._P.copy()
     Pv[sk.HP_U] = 18.0
@@ -54,8 +57,8 @@ def test_compiled_derivative_matches_numpy_reference(options):
         out = np.empty(sk.N_H_OUT)
         sk.h_deriv(s, ss[b], Pv, model._dk, model._dv, model._ds, model._pc, slip, steer, d,
                    out, True)  # fmt: skip
-        one = AxleSettings(*(np.atleast_1d(getattr(settings, f)[b]) for f in (
-            'dpsf_front', 'gas_volume_front_m3', 'dpsf_rear', 'gas_volume_rear_m3')))  # fmt: skip
+        one = AxleSettings.of({a: settings.dpsf(a)[b] for a in ('front', 'rear')},
+                              {a: settings.spring(a)[b] for a in ('front', 'rear')}, spring)
         ref = derivative_numpy(s[None], one, slip, steer, 18.0, model)[0]
         np.testing.assert_allclose(d, ref, rtol=1e-9, atol=1e-9)
 

@@ -61,6 +61,12 @@ RECORDS = [
     ),
 ]
 PHYSICAL = {'dpsf': 0.3997, 'gas_volume_l': 0.55}  # x -> physical, eqs. 4-6 (not checked here)
+BASELINE = {'dpsf': 1.0, 'gas_volume_l': 0.3}  # config/design_space.yaml's baseline
+#: Physical metrics of the reported design and the baseline (m/s^2 and %), binary-exact.
+METRICS = {'a_rms_driver_mps2': 1.125, 'a_rms_passenger_mps2': 1.375,
+           'tyre_lift_off_pct_fl': 2.5}
+BASELINE_METRICS = {'a_rms_driver_mps2': 1.25, 'a_rms_passenger_mps2': 1.5,
+                    'tyre_lift_off_pct_fl': 3.0}
 
 
 def build_bag(path):
@@ -148,6 +154,12 @@ def build_bag(path):
             max_violation=0.0,
             physical_names=list(PHYSICAL),
             physical_values=list(PHYSICAL.values()),
+            metric_names=list(METRICS),
+            metrics=list(METRICS.values()),
+            baseline_x=[0.3103448275862069, 0.4],
+            baseline_f=2.5,
+            baseline_physical_values=list(BASELINE.values()),
+            baseline_metrics=list(BASELINE_METRICS.values()),
             iterations=3,
             n_full_runs=4,
             n_simplified_runs=16,
@@ -197,6 +209,8 @@ def test_iteration_table_and_optimum_equal_the_messages_exactly(bag):
     assert best['x'] == RECORDS[-1]['x'] and best['f'] == RECORDS[-1]['f']
     assert best['g'] == RECORDS[-1]['g']
     assert best['physical'] == PHYSICAL
+    assert best['baseline'] == {'x': [0.3103448275862069, 0.4], 'f': 2.5, 'physical': BASELINE}
+    assert best['physical_metrics'] == {'reported': METRICS, 'baseline': BASELINE_METRICS}
     assert best['success'] and best['message'] == 'converged'
     assert best['feasible'] and best['best_iteration'] == 3 and best['source'] == 'result'
     ev = info['evaluations']
@@ -336,12 +350,16 @@ def test_cli_prints_table_json_and_writes_plots(bag, tmp_path, capsys):
     assert '/optimisation/progress' in text and 'converged' in text
     assert 'f = 1.2345678901234567' in text
     assert 'delay 50.0 ms' in text
-    for name in ('convergence.png', 'design.png', 'telemetry.png'):
+    assert 'baseline design: f = 2.5' in text
+    seat = next(line for line in text.splitlines() if 'seat W_b RMS, driver (m/s^2)' in line)
+    assert seat.split()[-2:] == ['1.250', '1.125']  # baseline, then the optimum
+    for name in ('convergence.png', 'design.png', 'metrics.png', 'telemetry.png'):
         data = (tmp_path / 'plots' / name).read_bytes()
         assert data[:8] == b'\x89PNG\r\n\x1a\n' and len(data) > 5000
     assert main([str(bag), '--json']) == 0
     info = json.loads(capsys.readouterr().out)
     assert info['optimum']['f'] == RECORDS[-1]['f']
+    assert info['optimum']['physical_metrics']['reported'] == METRICS
     assert main([str(tmp_path / 'missing')]) == 2
 
 

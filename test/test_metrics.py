@@ -7,6 +7,7 @@ from suspension_tuning.vehicle.metrics import (
     f_hand,
     f_ride,
     first_peak,
+    objective_scaling,
     rms,
     roll_rate_rms,
     tyre_hop_constraints,
@@ -42,6 +43,29 @@ def test_f_hand_hand_value():
     assert f_hand(3.25, 6.8) == pytest.approx(0.55, abs=1e-12)
     # r = 0.8 (term 0.1), p = 12.2 (term 1.0): f = 0.55 as well
     assert f_hand(0.8, 12.2) == pytest.approx(0.55, abs=1e-12)
+
+
+def test_the_normalisation_of_eqs_9_and_10_comes_from_config(monkeypatch):
+    # the shipped config/scenarios.yaml holds the paper's reference values
+    assert objective_scaling('ride') == {'a_min_mps2': 0.7, 'a_max_mps2': 4.4}
+    assert objective_scaling('handling') == {
+        'roll_rate_min_deg_s': 0.8, 'roll_rate_max_deg_s': 5.7, 'roll_peak_min_deg': 1.4,
+        'roll_peak_max_deg': 12.2}
+    from suspension_tuning.vehicle import params
+
+    # another vehicle's range: 0.2-1.2 m/s^2 and 1-4 deg/s, 1-5 deg
+    monkeypatch.setattr(params, 'load_scenarios_config', lambda: {
+        'ride': {'objective_scaling': {'a_min_mps2': 0.2, 'a_max_mps2': 1.2}},
+        'handling': {'objective_scaling': {
+            'roll_rate_min_deg_s': 1.0, 'roll_rate_max_deg_s': 4.0, 'roll_peak_min_deg': 1.0,
+            'roll_peak_max_deg': 5.0}}})
+    assert f_ride(0.7, 1.2) == pytest.approx(0.75, abs=1e-12)  # (0.5 + 1.0) / 2
+    assert f_hand(2.5, 3.0) == pytest.approx(0.55, abs=1e-12)  # (0.55 + 0.55) / 2
+    assert f_ride(0.7, 1.2, 0.7, 4.4) == pytest.approx(0.0676, abs=1e-4)  # explicit wins
+    monkeypatch.setattr(params, 'load_scenarios_config', lambda: {'ride': {}})
+    with pytest.raises(ValueError, match='ride.objective_scaling.a_min_mps2: expected a '
+                                         'number, got None'):
+        f_ride(1.0, 1.0)
 
 
 def test_rms_of_sine_is_amplitude_over_root_two():

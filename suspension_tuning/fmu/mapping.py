@@ -15,11 +15,11 @@ from typing import Any
 import yaml
 
 from suspension_tuning.fmu.units import UNITS, known_units
+from suspension_tuning.vehicle.design import DesignSpace, load_design_space
 
 CORNERS = ('fl', 'fr', 'rl', 'rr')
-DESIGN_KEYS = ('dpsf_front', 'gas_volume_front', 'dpsf_rear', 'gas_volume_rear')
-DESIGN_QUANTITIES = {'dpsf_front': 'dimensionless', 'dpsf_rear': 'dimensionless',
-                     'gas_volume_front': 'volume', 'gas_volume_rear': 'volume'}
+#: Keys of a design entry that maps the variable linearly onto the FMU parameter.
+LINEAR_MAP_KEYS = ('name', 'scale', 'offset', 'unit')
 #: Output channels: dimension, per wheel, and the scenarios needing them.
 OUTPUTS: dict[str, tuple[str, bool, tuple[str, ...]]] = {
     'acc_driver': ('acceleration', False, ('ride',)),
@@ -94,12 +94,18 @@ class VariableRef:
         Unit the mapping states (used where the FMU declares none).
     where : str
         Key path in the mapping, for messages.
+    scale, offset : float or None
+        A design entry's linear map: the FMU parameter gets ``offset + scale * v``, v the
+        design variable in its unit of config/design_space.yaml, in ``unit`` (None: the
+        variable itself, converted to the FMU's unit).
     """
 
     name: str
     quantity: str
     unit: str | None
     where: str
+    scale: float | None = None
+    offset: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -160,6 +166,9 @@ class FmuMapping:
     #: The vehicle's total mass, kg (optional): the start-up plausibility check
     #: compares the static tyre loads with it.
     vehicle_mass_kg: float | None = None
+    #: The design space whose variables the design section maps (default
+    #: config/design_space.yaml).
+    space: DesignSpace | None = field(default=None, repr=False)
 
 
 def _keys(d: Any, where: str, allowed: tuple[str, ...], required: tuple[str, ...] = ()) -> dict:
@@ -242,11 +251,45 @@ def _corners(value: Any, quantity: str, where: str,
     return refs
 
 
-def _design(value: Any, where: str) -> dict[str, VariableRef]:
-    d = _keys(value, where, DESIGN_KEYS, DESIGN_KEYS)
+def design_quantities(space: DesignSpace) -> dict[str, str]:
+    """The design section's keys (``dpsf_front``, ``gas_volume_front``...) and quantities."""
+    return {var.key(axle): var.quantity for axle in ('front', 'rear')
+            for var in (space.damper, space.spring)}
+
+
+def _linear_map(d: dict, where: str) -> VariableRef:
+    """A design entry ``{name, scale, offset, unit}``: the FMU parameter is linear in it."""
+    d = _keys(d, where, LINEAR_MAP_KEYS, ('name', 'scale', 'unit'))
     problems = _Problems()
-    refs = {k: problems.take(_ref, d[k], DESIGN_QUANTITIES[k], f'{where}.{k}')
-            for k in DESIGN_KEYS}
+    name = d['name']
+    if not isinstance(name, str) or not name:
+        problems.lines.append(f'{where}.name: expected an FMU variable name, got {name!r}')
+    scale = problems.take(_number, d, 'scale', where)
+    if scale == 0.0:
+        problems.lines.append(f'{where}.scale: must not be 0 (the parameter would not '
+                              'follow the design)')
+    offset = problems.take(_number, d, 'offset', where, 0.0)
+    unit = d['unit']
+    if not isinstance(unit, str):
+        problems.lines.append(f'{where}.unit: expected the FMU parameter\'s unit (e.g. '
+                              f"'N.s/m', 'bar', '-'), got {unit!r}")
+    if problems.lines:
+        raise MappingError('\n'.join(problems.lines))
+    quantity = UNITS[unit][0] if unit in UNITS else ''
+    return VariableRef(name, quantity, unit, where, scale, offset)
+
+
+def _design(value: Any, where: str, space: DesignSpace) -> dict[str, VariableRef]:
+    quantities = design_quantities(space)
+    keys = tuple(quantities)
+    d = _keys(value, where, keys, keys)
+    problems = _Problems()
+    refs = {}
+    for k in keys:
+        if isinstance(d[k], dict) and ('scale' in d[k] or 'offset' in d[k]):
+            refs[k] = problems.take(_linear_map, d[k], f'{where}.{k}')
+        else:
+            refs[k] = problems.take(_ref, d[k], quantities[k], f'{where}.{k}')
     if problems.lines:
         raise MappingError('\n'.join(problems.lines))
     return refs
@@ -324,7 +367,8 @@ def _window(value: Any, where: str) -> tuple[float, float]:
     return float(value[0]), float(value[1])
 
 
-def _scenario(name: str, d: Any, design: Any, where: str) -> ScenarioMapping | None:
+def _scenario(name: str, d: Any, design: Any, where: str,
+              space: DesignSpace) -> ScenarioMapping | None:
     """One scenario's mapping; its problems go to ``problems`` (None when there are any)."""
     problems = _Problems()
     d = _keys(d, where, (*SCENARIO_KEYS['common'], *SCENARIO_KEYS[name]),
@@ -351,7 +395,7 @@ def _scenario(name: str, d: Any, design: Any, where: str) -> ScenarioMapping | N
     if design is None:
         problems.lines.append(f'{where}: no design section (top-level or in the scenario)')
     else:
-        design_refs = problems.take(_design, design, design_where)
+        design_refs = problems.take(_design, design, design_where, space)
     windows = None
     if name == 'handling' and d.get('windows') is not None:
         w = problems.take(_keys, d['windows'], f'{where}.windows',
@@ -389,8 +433,13 @@ def _scenario(name: str, d: Any, design: Any, where: str) -> ScenarioMapping | N
         outputs=outputs, settle_s=settle, road=road, windows=windows)
 
 
-def parse_mapping(text: str, path: Path | None = None) -> FmuMapping:
+def parse_mapping(text: str, path: Path | None = None,
+                  space: DesignSpace | None = None) -> FmuMapping:
     """Check a mapping given as YAML text (see docs/fmu.md).
+
+    ``space``: the design space whose variables the design section maps (default
+    config/design_space.yaml): its keys are ``<name>_front`` and ``<name>_rear`` of the
+    damper and the spring variable.
 
     Raises
     ------
@@ -398,6 +447,7 @@ def parse_mapping(text: str, path: Path | None = None) -> FmuMapping:
         Every problem found, one line each, naming the key.
     """
     source = str(path) if path is not None else 'mapping'
+    space = space if space is not None else load_design_space()
     try:
         data = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader
     except MappingError as error:
@@ -412,15 +462,15 @@ def parse_mapping(text: str, path: Path | None = None) -> FmuMapping:
     if not scen:
         raise MappingError('scenarios: name at least one of ride, handling')
     scenarios = {name: problems.take(_scenario, name, body, d.get('design'),
-                                     f'scenarios.{name}') for name, body in scen.items()}
+                                     f'scenarios.{name}', space) for name, body in scen.items()}
     if problems.lines:
         raise MappingError(f'{source}: {len(problems.lines)} problem(s):\n  '
                            + '\n  '.join(problems.lines))
-    return FmuMapping(scenarios, path, text, mass)
+    return FmuMapping(scenarios, path, text, mass, space)
 
 
-def load_mapping(path: str | Path) -> FmuMapping:
-    """Read and check a mapping file.
+def load_mapping(path: str | Path, space: DesignSpace | None = None) -> FmuMapping:
+    """Read and check a mapping file (``space``: as :func:`parse_mapping`).
 
     Raises
     ------
@@ -432,4 +482,4 @@ def load_mapping(path: str | Path) -> FmuMapping:
         text = p.read_text()
     except OSError as error:
         raise MappingError(f'fmu_mapping {p}: cannot read it ({error.strerror})') from None
-    return parse_mapping(text, p)
+    return parse_mapping(text, p, space)

@@ -42,7 +42,7 @@ import yaml
 from suspension_tuning.evaluation import DesignEvaluation, metric_table
 from suspension_tuning.fmu.fmi_log import FmuLog, FmuMessage
 from suspension_tuning.fmu.mapping import CORNERS, FmuMapping, ScenarioMapping, load_mapping
-from suspension_tuning.fmu.units import Conversion, resolve
+from suspension_tuning.fmu.units import UNITS, Conversion, resolve
 from suspension_tuning.model_identity import with_fingerprint
 from suspension_tuning.vehicle import design as design_mod
 from suspension_tuning.vehicle import road as road_mod
@@ -129,6 +129,10 @@ class FmuModel:
 
         self.path = Path(fmu_path)
         self.mapping = mapping if isinstance(mapping, FmuMapping) else load_mapping(mapping)
+        #: The design space that turns normalised designs into the FMU's parameters.
+        self.space = self.mapping.space or design_mod.load_design_space()
+        keyed = {var.key(axle): var for axle in design_mod.AXLES
+                 for var in (self.space.damper, self.space.spring)}
         if not self.path.is_file():
             raise FmuConfigError(f'fmu_path {self.path}: no such file')
         try:
@@ -169,7 +173,10 @@ class FmuModel:
         for name, sm in self.mapping.scenarios.items():
             conv: dict[str, Conversion] = {}
             for key, ref in sm.design.items():
-                conv[f'design.{key}'] = self._check(ref, PARAMETER_CAUSALITIES, units, problems)
+                conv[f'design.{key}'] = (
+                    self._check(ref, PARAMETER_CAUSALITIES, units, problems)
+                    if ref.scale is None else self._check_linear(ref, keyed[key], units,
+                                                                 problems))
             if sm.speed_parameter is not None:
                 conv['speed_parameter'] = self._check(sm.speed_parameter, PARAMETER_CAUSALITIES,
                                                       units, problems)
@@ -232,6 +239,47 @@ class FmuModel:
         if bad:
             problems.append(f'{ref.where}: FMU variable {ref.name!r} has ' + '; '.join(bad))
         return conversion
+
+    def _check_linear(self, ref, var: design_mod.DesignVariable, units,
+                      problems: list[str]) -> Conversion:
+        """A linearly mapped design parameter: FMU value = offset + scale * v, in ref.unit.
+
+        v is the design variable in its unit of the design space.  When the FMU declares
+        the parameter's unit, the mapping's unit must be it, or one of the same dimension
+        this tool converts (else the problem is listed).  Returned as the affine
+        :class:`Conversion` from the variable's SI value to the FMU's value.
+        """
+        v = self.variables.get(ref.name)
+        if v is None:
+            problems.append(f'{ref.where}: the FMU has no variable {ref.name!r}')
+            return Conversion('')
+        bad = []
+        if v.causality not in PARAMETER_CAUSALITIES:
+            bad.append(f'causality {v.causality!r}, expected parameter')
+        if v.type not in REAL_TYPES:
+            bad.append(f'type {v.type}, expected a real ({", ".join(REAL_TYPES)})')
+        declared = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
+        to_declared = 1.0  # FMU value per value in the mapping's unit
+        shift = 0.0
+        if declared and declared != ref.unit:
+            if ref.quantity:
+                try:
+                    fmu_unit = resolve(ref.quantity, declared, None, units)
+                    to_declared = UNITS[ref.unit][1] / fmu_unit.factor
+                    shift = -fmu_unit.offset / fmu_unit.factor
+                except ValueError as error:
+                    bad.append(str(error))
+            else:
+                bad.append(f'the mapping gives {ref.unit!r} but the FMU declares {declared!r}')
+        elif not declared and ref.quantity not in ('', 'dimensionless'):
+            self.undeclared_units.append(f'{ref.where} ({ref.name}, taken as {ref.unit})')
+        if bad:
+            problems.append(f'{ref.where}: FMU variable {ref.name!r} has ' + '; '.join(bad))
+            return Conversion('')
+        # FMU value = to_declared * (offset + scale * v_si / var.factor) + shift = A v + B
+        a = to_declared * ref.scale / var.factor
+        b = to_declared * ref.offset + shift
+        return Conversion(ref.unit or '', 1.0 / a, -b / a)
 
     def _check_fixed(self, sm: ScenarioMapping, name: str, problems: list[str]) -> None:
         v = self.variables.get(name)
@@ -300,9 +348,8 @@ class FmuModel:
         is most likely wrong (0.1-0.6 sent as litres to a parameter that starts at 300
         cm^3).
         """
-        ranges = {'dpsf_front': design_mod.DPSF_RANGE, 'dpsf_rear': design_mod.DPSF_RANGE,
-                  'gas_volume_front': design_mod.GVOL_RANGE_M3,
-                  'gas_volume_rear': design_mod.GVOL_RANGE_M3}
+        ranges = {var.key(axle): (var.axle(axle).low, var.axle(axle).high)
+                  for axle in design_mod.AXLES for var in (self.space.damper, self.space.spring)}
         out, seen = [], set()
         for name, sm in self.mapping.scenarios.items():
             for key, ref in sm.design.items():
@@ -412,10 +459,11 @@ class FmuModel:
 
     def _parameter_values(self, sm: ScenarioMapping, x: np.ndarray) -> list[dict]:
         """FMU parameter values (FMU units) of each design: fixed, speed, design."""
-        phys = design_mod.to_physical(x, x.shape[1])
-        si = {'dpsf_front': phys.dpsf_front, 'dpsf_rear': phys.dpsf_rear,
-              'gas_volume_front': phys.gas_volume_front_m3,
-              'gas_volume_rear': phys.gas_volume_rear_m3}
+        phys = self.space.to_physical(x, x.shape[1])
+        si = {}
+        for axle in design_mod.AXLES:
+            si[self.space.damper.key(axle)] = phys.dpsf(axle)
+            si[self.space.spring.key(axle)] = phys.spring(axle)
         conv = self.conversions[sm.name]
         out = []
         for i in range(len(x)):

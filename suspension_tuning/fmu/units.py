@@ -3,9 +3,9 @@
 A mapped value travels in SI inside the tool (m^3, N, rad, m/s^2...).  At the FMU's
 boundary it is converted to the unit the FMU declares for the variable (its
 ``unit`` attribute or its declared type's), or, where the FMU declares none, to the
-unit the mapping states, or else left in SI.  A unit is known by name (table below)
-or by the FMU's own unit definition (SI base-unit exponents, factor and offset, as
-FMI 2.0 and 3.0 ``<UnitDefinitions>`` give them).
+unit the mapping states, or else left in SI.  A unit is known by name (the table of
+:mod:`suspension_tuning.units`) or by the FMU's own unit definition (SI base-unit
+exponents, factor and offset, as FMI 2.0 and 3.0 ``<UnitDefinitions>`` give them).
 """
 
 from __future__ import annotations
@@ -13,34 +13,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-#: Dimensions as SI base-unit exponents (kg, m, s, rad).
-DIMENSIONS: dict[str, tuple[int, int, int, int]] = {
-    'dimensionless': (0, 0, 0, 0),
-    'volume': (0, 3, 0, 0),
-    'length': (0, 1, 0, 0),
-    'velocity': (0, 1, -1, 0),
-    'acceleration': (0, 1, -2, 0),
-    'force': (1, 1, -2, 0),
-    'angle': (0, 0, 0, 1),
-    'angular_velocity': (0, 0, -1, 1),
-    'time': (0, 0, 1, 0),
-}
+from suspension_tuning.units import DIMENSIONS, UNITS, known_units, si_unit
 
-#: Unit names this tool knows: (dimension, factor to SI).  FMI base units count
-#: angles in rad; a unit without rad (plain 1/s) is accepted for angular velocity.
-UNITS: dict[str, tuple[str, float]] = {
-    '1': ('dimensionless', 1.0), '-': ('dimensionless', 1.0), '': ('dimensionless', 1.0),
-    'm3': ('volume', 1.0), 'm^3': ('volume', 1.0), 'L': ('volume', 1e-3),
-    'l': ('volume', 1e-3), 'dm3': ('volume', 1e-3), 'cm3': ('volume', 1e-6),
-    'm': ('length', 1.0), 'mm': ('length', 1e-3), 'cm': ('length', 1e-2),
-    'm/s': ('velocity', 1.0), 'km/h': ('velocity', 1.0 / 3.6),
-    'm/s2': ('acceleration', 1.0), 'm/s^2': ('acceleration', 1.0),
-    'm/(s2)': ('acceleration', 1.0), 'm.s-2': ('acceleration', 1.0),
-    'N': ('force', 1.0), 'kN': ('force', 1e3),
-    'rad': ('angle', 1.0), 'deg': ('angle', math.pi / 180.0),
-    'rad/s': ('angular_velocity', 1.0), 'deg/s': ('angular_velocity', math.pi / 180.0),
-    's': ('time', 1.0),
-}
+__all__ = ['DIMENSIONS', 'UNITS', 'Conversion', 'known_units', 'resolve', 'si_unit']
 
 
 @dataclass(frozen=True)
@@ -116,14 +91,3 @@ def resolve(quantity: str, declared: str | None, stated: str | None,
     if stated is not None and (not math.isclose(UNITS[stated][1], factor) or offset):
         raise ValueError(f'the mapping says {stated!r} but the FMU declares {declared!r}')
     return Conversion(declared, factor, offset)
-
-
-def si_unit(quantity: str) -> str:
-    """The SI unit name of a dimension."""
-    return next(name for name, (dim, factor) in UNITS.items()
-                if dim == quantity and factor == 1.0)
-
-
-def known_units(quantity: str) -> str:
-    """Comma-separated names of the known units of a dimension."""
-    return ', '.join(repr(name) for name, (dim, _) in UNITS.items() if dim == quantity)

@@ -12,8 +12,10 @@ calibrated (eq. 25, ``calibrate``) for every scenario with simplified terms.
 
 Feedback every iteration; the result holds the reported design (the best feasible
 iterate, or the least violating one when none was feasible, and says which; also in
-physical units), the history and the full-model, simplified-model and calibration run
-counts.  The run's configuration is published on ``/optimisation/run_config`` when a
+physical units), its physical metrics beside those of the baseline design
+(config/design_space.yaml; one more full run per goal, not counted in the
+optimisation's runs), the history and the full-model, simplified-model and calibration
+run counts.  The run's configuration is published on ``/optimisation/run_config`` when a
 goal starts, every iteration on ``/optimisation/progress`` and the result on
 ``/optimisation/result``, so that the recorder puts one run in one bag.  A goal with
 gradient source 'evaluate' is one full-model run of its x0 instead, in any full-model
@@ -30,6 +32,7 @@ itself is :func:`suspension_tuning.tuning.optimise`, shared with in-process runs
 from __future__ import annotations
 
 import collections
+import math
 import subprocess
 import threading
 import time
@@ -55,6 +58,7 @@ from suspension_tuning.optim.correction import load_correction_options
 from suspension_tuning.optim.dynamic_q import load_options
 from suspension_tuning.optim.scaling import fit_note, load_min_fit_r2, poor_fits
 from suspension_tuning.paths import config_dir, dump_yaml, read_yaml
+from suspension_tuning.physical_metrics import SHOWN, physical_metrics
 from suspension_tuning.reported_design import design_success, reported_design, result_message
 from suspension_tuning.tuning import (
     FullEvaluation,
@@ -65,7 +69,7 @@ from suspension_tuning.tuning import (
     optimise,
     physical_settings,
 )
-from suspension_tuning.vehicle.design import validate_design
+from suspension_tuning.vehicle.design import load_design_space, validate_design
 
 CONFIG_DIR = config_dir()
 #: Goal gradient_source of a single recorded full-model run instead of an optimisation.
@@ -131,11 +135,12 @@ def action_result(result: Any, history: list[IterationRecord], t0: float,
                    counter: RunCounter) -> Optimise.Result:
     """The action result of a :func:`~suspension_tuning.tuning.optimise` result.
 
-    x, f, g, the constraint values and the physical settings are those of the reported
-    design (:mod:`suspension_tuning.reported_design`): the best feasible iterate, or,
-    when no iterate was feasible, the least violating one, which the message and
-    ``feasible`` say plainly and which never counts as a success.  The last iterate is
-    the history's last record.
+    x, f, g, the constraint values, the physical settings and the physical metrics
+    (``metrics_best``, :mod:`suspension_tuning.physical_metrics`) are those of the
+    reported design (:mod:`suspension_tuning.reported_design`): the best feasible
+    iterate, or, when no iterate was feasible, the least violating one, which the
+    message and ``feasible`` say plainly and which never counts as a success.  The last
+    iterate is the history's last record.  The baseline's fields are the caller's.
     """
     design = reported_design(result)
     stop = str(result.message)
@@ -149,7 +154,7 @@ def action_result(result: Any, history: list[IterationRecord], t0: float,
             iterations=int(result.get('nit', 0)), history=history,
             wall_time_s=time.monotonic() - t0, **counter.as_dict())
     physical = physical_settings(design.x)
-    return Optimise.Result(
+    message = Optimise.Result(
         success=design_success(result, design),
         message=result_message(design, stop),
         x=design.x, f=design.f, g=design.g, feasible=design.feasible,
@@ -159,6 +164,33 @@ def action_result(result: Any, history: list[IterationRecord], t0: float,
         physical_names=list(physical), physical_values=list(physical.values()),
         iterations=int(result.nit), history=history, wall_time_s=time.monotonic() - t0,
         **counter.as_dict())
+    scenario = str(result.get('scenario', ''))
+    set_metrics(message, scenario, reported=physical_metrics(
+        scenario, (), result.get('metrics_best') or {}))
+    return message
+
+
+def set_metrics(message: Optimise.Result, scenario: str,
+                reported: dict[str, float] | None = None,
+                baseline: dict[str, float] | None = None) -> None:
+    """Put the reported design's and/or the baseline's physical metrics into a result.
+
+    ``metric_names`` lists every metric either side has, in the order of
+    :data:`suspension_tuning.physical_metrics.SHOWN`; ``metrics`` and
+    ``baseline_metrics`` hold one value per name (NaN where that side lacks it), or
+    none when that side has no metrics at all.
+    """
+    sides = {'metrics': reported, 'baseline_metrics': baseline}
+    for field, values in sides.items():
+        if values is None:
+            old = getattr(message, field)
+            sides[field] = dict(zip(message.metric_names, old)) if len(old) else {}
+    names = [shown for _, shown, _ in SHOWN.get(scenario, ())
+             if any(shown in values for values in sides.values())]
+    message.metric_names = names
+    for field, values in sides.items():
+        setattr(message, field, [float(values.get(n, math.nan)) for n in names]
+                if values else [])
 
 
 class CoordinatorNode(Node):
@@ -214,6 +246,10 @@ class CoordinatorNode(Node):
         self.options = load_options(config, str(self.get_parameter('optimiser_section').value))
         self.correction = load_correction_options(config)
         self.min_fit_r2 = load_min_fit_r2(config)
+        #: The baseline design's run per (scenario, n_vars, integrator, road, model
+        #: fingerprint): (x, f, metric names, metrics).
+        self._baselines: dict[tuple[str, int, str, str, str],
+                              tuple[list[float], float, list[str], list[float]]] = {}
         self.progress_pub = self.create_publisher(IterationRecord, '/optimisation/progress',
                                                   RELIABLE)
         self.config_pub = self.create_publisher(String, '/optimisation/run_config', LATCHED)
@@ -328,6 +364,35 @@ class CoordinatorNode(Node):
                                   metric_names=list(responses[0].metric_names),
                                   metrics=metrics)
         return evaluate
+
+    def _baseline(self, request: TuningRequest, fingerprint: str
+                  ) -> tuple[list[float], float, list[str], list[float]]:
+        """The baseline design's run (config/design_space.yaml): x, f, metric names, metrics.
+
+        One full run of the objective's scenario on the workers, kept for the next goal
+        of the same scenario, variables, integrator, road and model.
+        """
+        key = (request.scenario, request.n_vars, request.integrator, request.road, fingerprint)
+        if key not in self._baselines:
+            x = load_design_space().baseline_x(request.n_vars)
+            [response] = self.pool.evaluate(request.scenario, request.n_vars, x[None, :],
+                                            integrator=request.integrator, road=request.road)
+            self._baselines[key] = (x.tolist(), float(response.f[0]),
+                                    list(response.metric_names), list(response.metrics))
+        return self._baselines[key]
+
+    def _add_baseline(self, message: Optimise.Result, request: TuningRequest,
+                      fingerprint: str) -> None:
+        """The baseline design's fields of the result (a failed run: a warning)."""
+        try:
+            x, f, names, values = self._baseline(request, fingerprint)
+        except (ValueError, ServiceCallError) as error:
+            self.get_logger().warning(f'run of the baseline design failed: {error}')
+            return
+        message.baseline_x, message.baseline_f = x, f
+        message.baseline_physical_values = list(physical_settings(x).values())
+        set_metrics(message, request.scenario, baseline=physical_metrics(
+            request.scenario, names, values))
 
     def _simplified_gradient(self, request: TuningRequest, scenario: str | None = None):
         """The scaled simplified gradient of ``scenario`` from the gradient evaluator."""
@@ -486,6 +551,8 @@ class CoordinatorNode(Node):
             physical_values=list(physical.values()), iterations=0, history=[record],
             wall_time_s=time.monotonic() - t0, model_fingerprint=fingerprint,
             **counter.as_dict())
+        set_metrics(message, goal.scenario, reported=physical_metrics(
+            goal.scenario, response.metric_names, response.metrics))
         goal_handle.succeed()
         self.result_pub.publish(message)
         return message
@@ -560,13 +627,19 @@ class CoordinatorNode(Node):
         message = action_result(result, history_msgs, t0, counter)
         message.model_fingerprint = fingerprint
         design = reported_design(result)
+        if design is not None and not goal_handle.is_cancel_requested:
+            self._add_baseline(message, request, fingerprint)
         if (design is not None and self.get_parameter('final_telemetry').value
                 and not goal_handle.is_cancel_requested):
             try:
-                self.pool.evaluate(request.scenario, request.n_vars,
-                                   np.asarray(design.x, float)[None, :],
-                                   publish_telemetry=True, integrator=request.integrator,
-                                   road=request.road)
+                [response] = self.pool.evaluate(request.scenario, request.n_vars,
+                                                np.asarray(design.x, float)[None, :],
+                                                publish_telemetry=True,
+                                                integrator=request.integrator,
+                                                road=request.road)
+                if not len(message.metrics):  # a resumed design without recorded metrics
+                    set_metrics(message, request.scenario, reported=physical_metrics(
+                        request.scenario, response.metric_names, response.metrics))
             except (ValueError, ServiceCallError) as error:
                 self.get_logger().warning(f'telemetry run of the reported design failed: '
                                           f'{error}')

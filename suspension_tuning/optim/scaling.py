@@ -51,6 +51,7 @@ Array = NDArray[np.float64]
 FUNCTION_NAMES = ('f', 'g_fl', 'g_fr', 'g_rl', 'g_rr')
 #: Config files whose content defines both models (hashed into the cache key).
 KEY_CONFIG_FILES = (
+    'design_space.yaml',
     'vehicle.yaml',
     'strut_4s4.yaml',
     'tyre.yaml',

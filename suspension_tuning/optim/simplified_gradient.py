@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from suspension_tuning.optim.finite_diff import central_difference
 from suspension_tuning.optim.scaling import Scaling, fit_scaling, sample_design_space, scaling_key
-from suspension_tuning.vehicle.design import X_LOWER, X_UPPER, validate_design
+from suspension_tuning.vehicle.design import X_LOWER, X_UPPER, DesignSpace, validate_design
 from suspension_tuning.vehicle.handling_model import HandlingInputs
 from suspension_tuning.vehicle.pitch_plane import load_simplified_config
 from suspension_tuning.vehicle.simplified import SimplifiedInputs, run_simplified
@@ -63,6 +63,7 @@ def simplified_values(
     inputs: Any = None,
     scaling: Scaling | None = None,
     road: str = '',
+    space: DesignSpace | None = None,
 ) -> Array:
     """Simplified-model values (batch, 1 + 4): objective then constraints FL..RR.
 
@@ -71,9 +72,10 @@ def simplified_values(
     :func:`~suspension_tuning.vehicle.metrics.soft_tyre_hop_constraints`, smooth in the
     design) or 'count' (eq. 11 as the full model counts it).  Scaled by eq. 25 when
     ``scaling`` is given.  ``road``: the ride road in place of the configured one.
+    ``space``: the design space (default config/design_space.yaml).
     """
     inp = as_simplified_inputs(scenario, inputs)
-    out = run_simplified(scenario, x, n_vars, inp, road)
+    out = run_simplified(scenario, x, n_vars, inp, road, space)
     vals = np.column_stack([out['f'], out[constraint_measure_key()]])
     return scaling.apply(vals) if scaling is not None else vals
 
@@ -131,6 +133,7 @@ def fit_calibration(
     inputs: list[SimplifiedInputs] | None,
     key: dict[str, Any],
     road: str = '',
+    space: DesignSpace | None = None,
 ) -> Scaling:
     """Eq. 25 fit from full-model values at the calibration designs.
 
@@ -139,15 +142,17 @@ def fit_calibration(
     is the calibration's :func:`~suspension_tuning.optim.scaling.scaling_key`, kept
     with the scaling (the caller has it already: it names the cache file).  ``road``:
     the ride road of the full-model samples, which the pitch-plane model drives too.
+    ``space``: the design space (default config/design_space.yaml).
     """
     full = np.column_stack([np.asarray(full_f, dtype=float), np.asarray(full_g, dtype=float)])
     if scenario == 'ride':
-        simp = simplified_values('ride', x, n_vars, road=road)
+        simp = simplified_values('ride', x, n_vars, road=road, space=space)
     else:
         if inputs is None or len(inputs) != len(x):
             raise ValueError('the handling calibration needs the full model inputs per sample')
         simp = np.vstack(
-            [simplified_values(scenario, x[i], n_vars, inputs[i]) for i in range(len(x))]
+            [simplified_values(scenario, x[i], n_vars, inputs[i], space=space)
+             for i in range(len(x))]
         )
     return fit_scaling(x, full, simp, key=key)
 
@@ -159,6 +164,7 @@ def calibrate(
     seed: int | None = None,
     run_full=None,
     model_fingerprint: str | None = None,
+    space: DesignSpace | None = None,
 ) -> Scaling:
     """Fit the eq. 25 scaling from N full-model samples over the design space.
 
@@ -176,6 +182,9 @@ def calibrate(
     model_fingerprint : str, optional
         Fingerprint of the model ``run_full`` runs, for the key (default the built-in
         model's, :func:`suspension_tuning.model_identity.builtin_fingerprint`).
+    space : DesignSpace, optional
+        The design space of the simplified models (default config/design_space.yaml;
+        ``run_full`` must use the same).
 
     Returns
     -------
@@ -188,7 +197,8 @@ def calibrate(
     res = run_full(scenario, x)
     inputs = [SimplifiedInputs.from_scenario_result(res, i) for i in range(n_samples)]
     return fit_calibration(scenario, n_vars, x, res.f, res.g, inputs,
-                           scaling_key(scenario, n_vars, n_samples, seed, model_fingerprint))
+                           scaling_key(scenario, n_vars, n_samples, seed, model_fingerprint),
+                           space=space)
 
 
 def load_or_calibrate(
@@ -235,6 +245,8 @@ class SimplifiedGradient:
     road : str, optional
         Ride road in place of config/scenarios.yaml's (a road name, a road file or an
         entry as YAML); empty = the configured one.
+    space : DesignSpace, optional
+        The design space (default config/design_space.yaml).
 
     Notes
     -----
@@ -251,6 +263,7 @@ class SimplifiedGradient:
         scaling: Scaling | None = None,
         step: float | None = None,
         road: str = '',
+        space: DesignSpace | None = None,
     ) -> None:
         if scenario not in ('ride', 'handling'):
             raise ValueError(f"unknown scenario {scenario!r}; valid: 'ride', 'handling'")
@@ -263,6 +276,7 @@ class SimplifiedGradient:
         self.road = str(road)
         self.n_vars = int(n_vars)
         self.scaling = scaling
+        self.space = space
         step = load_simplified_config()['gradient']['step'] if step is None else step
         if not (np.isfinite(step) and 0.0 < step <= 0.25):
             raise ValueError(f'step must lie in (0, 0.25], got {step}')
@@ -277,7 +291,7 @@ class SimplifiedGradient:
         xb = validate_design(x, self.n_vars)
         self.n_runs += xb.shape[0]
         return simplified_values(self.scenario, xb, self.n_vars, inputs, self.scaling,
-                                 self.road)
+                                 self.road, self.space)
 
     def __call__(self, x: ArrayLike, inputs: Any = None) -> tuple[Array, Array, Array]:
         """Gradient of f (n,), Jacobian of g (4, n) and the values (5,) at x.

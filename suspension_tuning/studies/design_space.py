@@ -27,7 +27,7 @@ from suspension_tuning.optim.simplified_gradient import (
     load_or_calibrate,
     simplified_values,
 )
-from suspension_tuning.vehicle.design import VARIABLE_NAMES, X_LOWER, X_UPPER
+from suspension_tuning.vehicle.design import X_LOWER, X_UPPER, load_design_space
 from suspension_tuning.vehicle.pitch_plane import load_simplified_config
 from suspension_tuning.vehicle.scenarios import run_scenario
 from suspension_tuning.vehicle.simplified import SimplifiedInputs
@@ -113,13 +113,18 @@ def grid_comparison(
         'grid_shape': g1.shape,
     }
     if png is not None:
-        names = VARIABLE_NAMES[n_vars]
-        _plot_grid(png, scenario, v, f_full.reshape(g1.shape), simp.reshape(g1.shape),
+        # the axes in physical units, named as config/design_space.yaml names them
+        space = load_design_space()
+        names = space.names(n_vars)
+        low, high = space.bounds(n_vars)
+        variables = space.variables(n_vars)
+        values = [variables[a][0].in_unit(low[a] + v * (high[a] - low[a])) for a in axes]
+        _plot_grid(png, scenario, values, f_full.reshape(g1.shape), simp.reshape(g1.shape),
                    (names[axes[0]], names[axes[1]]), out['r2'])  # fmt: skip
     return out
 
 
-def _plot_grid(png, scenario, v, f_full, f_simp, labels, r2) -> None:
+def _plot_grid(png, scenario, values, f_full, f_simp, labels, r2) -> None:
     import matplotlib
 
     matplotlib.use('Agg')
@@ -129,9 +134,9 @@ def _plot_grid(png, scenario, v, f_full, f_simp, labels, r2) -> None:
     lo, hi = min(f_full.min(), f_simp.min()), max(f_full.max(), f_simp.max())
     levels = np.linspace(lo, hi, 15) if hi > lo else 15
     for ax, z, title in ((axs[0], f_full, 'full model'), (axs[1], f_simp, 'simplified, eq. 25')):
-        cs = ax.contourf(v, v, z.T, levels=levels, cmap='viridis')
-        ax.set_xlabel(f'x: {labels[0]} (normalised)')
-        ax.set_ylabel(f'x: {labels[1]} (normalised)')
+        cs = ax.contourf(values[0], values[1], z.T, levels=levels, cmap='viridis')
+        ax.set_xlabel(labels[0])
+        ax.set_ylabel(labels[1])
         ax.set_title(f'{scenario} f, {title}')
         fig.colorbar(cs, ax=ax)
     axs[2].plot(f_full.ravel(), f_simp.ravel(), 'o')

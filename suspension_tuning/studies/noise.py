@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from suspension_tuning.optim.scaling import FUNCTION_NAMES, Scaling
 from suspension_tuning.optim.simplified_gradient import load_or_calibrate, simplified_values
-from suspension_tuning.vehicle.design import X_LOWER, X_UPPER
+from suspension_tuning.vehicle.design import X_LOWER, X_UPPER, load_design_space
 from suspension_tuning.vehicle.full_model import CORNERS
 from suspension_tuning.vehicle.pitch_plane import load_simplified_config
 from suspension_tuning.vehicle.scenarios import run_scenario
@@ -179,7 +179,7 @@ def sweep_x1(
             for nm in FUNCTION_NAMES
         }
     if png is not None:
-        _plot(png, scenario, x1, models)
+        _plot(png, scenario, x1, models, n_vars)
     return out
 
 
@@ -270,7 +270,7 @@ def step_size_history(
     return out
 
 
-def _plot(png, scenario, x1, models) -> None:
+def _plot(png, scenario, x1, models, n_vars: int = 4) -> None:
     import matplotlib
 
     matplotlib.use('Agg')
@@ -287,9 +287,17 @@ def _plot(png, scenario, x1, models) -> None:
             axs[1].plot(x1, v[:, i], styles[m], ms=3, label=f'{labels[m]} {nm}')
     axs[0].set_title(f'{scenario}: objective f vs x1 (Figs 7-8)')
     axs[1].set_title(f'{scenario}: tyre-hop constraints g vs x1')
+    space = load_design_space()
+    var, _ = space.variables(n_vars)[0]
+    low, high = space.bounds(n_vars)
+    physical = var.in_unit(low[0] + np.asarray(x1, dtype=float) * (high[0] - low[0]))
     for ax in axs:
-        ax.set_xlabel('x1 (front damper dpsf, normalised)')
+        ax.set_xlabel('x1 (front damper, normalised)')
         ax.legend(fontsize=7)
+        top = ax.secondary_xaxis('top', functions=(
+            lambda x: np.interp(x, x1, physical), lambda v: np.interp(v, physical, x1)))
+        top.set_xlabel(f'{space.names(n_vars)[0]} (physical, config/design_space.yaml)',
+                       fontsize=8)
     fig.tight_layout()
     Path(png).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(png, dpi=90)

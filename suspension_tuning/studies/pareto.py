@@ -26,7 +26,7 @@ classes):
    fixed, as the reference of the closed-loop gaps.
 
 gap(f) = 100 (f - f_opt) / (f_baseline - f_opt): the share of the improvement from the
-baseline vehicle (config/scenarios.yaml ``baseline_design``, a passive setting) to
+baseline vehicle (config/design_space.yaml's baseline, a passive setting) to
 the single-objective optimum that a design loses.  The best passive compromise is the
 front point with the smallest larger gap of the two.
 """
@@ -570,8 +570,8 @@ passive design x has f_ride(x) from the 'ride' scenario and f_hand(x) from the
 'handling' scenario at the same x (tested: same bits); that is why the scenario
 objectives over one shared x give the passive front.
 
-**Baseline vehicle.**  The passive setting of `baseline_design` in
-config/scenarios.yaml (dpsf 1, 0.3 L: close to a standard Defender 110 coil rate).
+**Baseline vehicle.**  The passive setting of the baseline in
+config/design_space.yaml (dpsf 1, 0.3 L: close to a standard Defender 110 coil rate).
 
 **Switched suspension.**  The 4S4 with its ride state (soft spring, low damping) set
 by the ride optimum x_r and its handling state (stiff spring, high damping) by the

@@ -9,8 +9,10 @@ compiled helpers of the full model (``_kernel._hermite``, ``_pen``, ``_pacejka``
 
 Strut parameter block (first ``N_SP`` entries of both parameter vectors): piston area,
 polytropic exponent, atmospheric pressure, bump clearance/stiffness/cubic/smoothing,
-rebound clearance/stiffness/cubic/smoothing.  Strut state per axle ``ss`` (2, 4): gas
-constant K = V_s p_s^(1/n), static volume V_s, guard volume, dpsf (as in strut.py).
+rebound clearance/stiffness/cubic/smoothing.  Strut state per axle ``ss`` (2, 6): gas
+constant K = V_s p_s^(1/n), static volume V_s, guard volume, dpsf (as in strut.py), and
+for a coil spring its rate k (> 0; 0 for the gas spring) and the static strut load F_s
+(``strut.coil_force_n``: F = F_s + k x).
 """
 
 from __future__ import annotations
@@ -25,7 +27,8 @@ from ._kernel import _hermite, _pacejka, _pen
 # ---- strut parameter block ------------------------------------------------------------
 S_AP, S_N, S_PATM, S_BCL, S_BK, S_BK3, S_BS, S_RCL, S_RK, S_RK3, S_RS = range(11)
 N_SP = 11
-SS_K, SS_V, SS_VG, SS_DPSF = 0, 1, 2, 3
+SS_K, SS_V, SS_VG, SS_DPSF, SS_KC, SS_F0 = 0, 1, 2, 3, 4, 5
+N_SS = 6
 
 # ---- pitch-plane parameters (after the strut block) ----------------------------------
 (PP_G, PP_A, PP_B, PP_MB, PP_IY, PP_MAF, PP_MAR, PP_KT, PP_CT, PP_DSTF, PP_DSTR, PP_XD, PP_XP) = (
@@ -68,14 +71,17 @@ N_H_OUT = 11
 
 @njit(cache=True, inline='always', error_model='numpy')
 def _strut(x, xd, ss_ax, sp, dk, dv, ds):
-    """4S4 strut force [N] (strut.strut_force: gas + dpsf damper + stops)."""
-    vc = ss_ax[SS_V] - sp[S_AP] * x
-    vg = ss_ax[SS_VG]
-    vv = vc if vc > vg else vg
-    p = (ss_ax[SS_K] / vv) ** sp[S_N]
-    if vc < vg:
-        p -= sp[S_N] * p / vv * (vc - vg)
-    f_gas = (p - sp[S_PATM]) * sp[S_AP]
+    """4S4 strut force [N] (strut.strut_force: gas or coil spring + dpsf damper + stops)."""
+    if ss_ax[SS_KC] > 0.0:  # coil spring (strut.coil_force_n)
+        f_gas = ss_ax[SS_F0] + ss_ax[SS_KC] * x
+    else:
+        vc = ss_ax[SS_V] - sp[S_AP] * x
+        vg = ss_ax[SS_VG]
+        vv = vc if vc > vg else vg
+        p = (ss_ax[SS_K] / vv) ** sp[S_N]
+        if vc < vg:
+            p -= sp[S_N] * p / vv * (vc - vg)
+        f_gas = (p - sp[S_PATM]) * sp[S_AP]
     f_damp = -ss_ax[SS_DPSF] * _hermite(-xd, dk, dv, ds)
     db = _pen(x - sp[S_BCL], sp[S_BS])
     dr = _pen(-x - sp[S_RCL], sp[S_RS])

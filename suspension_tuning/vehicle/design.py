@@ -1,11 +1,15 @@
-"""Design variables of the 4S4 tuning problem (Thoresson et al. 2009, Part 1, eqs. 4-8).
+"""Design variables of the tuning problem (Thoresson et al. 2009, Part 1, eqs. 4-8).
 
 The optimiser works on normalised variables ``x`` in ``[X_LOWER, X_UPPER]``; the vehicle
-model works on physical settings (damper force scale factor ``dpsf`` and static gas
-volume in m^3).  Eq. 4 maps a physical value ``v`` in ``[v_low, v_high]`` to
-``x = (v - v_low) / (v_high - v_low)``.  Note that the paper's lower bound
-``x = 0.001`` (eqs. 6, 8) therefore maps to ``dpsf = 0.1029`` and ``gvol = 0.1005 L``,
-not exactly to the range ends 0.1 and 0.1 L: that is the paper's choice and is kept.
+model works on physical settings per axle: a damper force scale factor (dpsf) and a
+spring variable, the static gas volume of a gas spring in m^3 or, for a coil-sprung
+vehicle, a spring rate in N/m.  What each variable is called, its range and the
+baseline vehicle's value come from config/design_space.yaml (:class:`DesignSpace`;
+the defaults are the paper's: dpsf 0.1-3, gas volume 0.1-0.6 L).  Eq. 4 maps a
+physical value ``v`` in ``[v_low, v_high]`` to ``x = (v - v_low) / (v_high - v_low)``.
+Note that the paper's lower bound ``x = 0.001`` (eqs. 6, 8) therefore maps to a value
+just above ``v_low`` (``dpsf = 0.1029`` and ``gvol = 0.1005 L`` for the paper's ranges):
+that is the paper's choice and is kept.
 
 Two variable sets exist (section 5.1):
 
@@ -18,18 +22,20 @@ All functions accept a single design of shape ``(n,)`` or a batch of shape
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
 import numpy as np
+
+from suspension_tuning.paths import config_dir, read_yaml
+from suspension_tuning.units import UNITS, known_units, unit_suffix
 
 X_LOWER = 0.001
 """Lower bound of every normalised design variable [P eqs. 6, 8]."""
 X_UPPER = 1.0
 """Upper bound of every normalised design variable [P eqs. 6, 8]."""
-DPSF_RANGE = (0.1, 3.0)
-"""Damper force scale factor range, dimensionless, 4S4 design limits [P section 5.1]."""
-GVOL_RANGE_M3 = (0.1e-3, 0.6e-3)
-"""Static gas volume range in m^3 (0.1-0.6 L), 4S4 design limits [P section 5.1]."""
 
 VARIABLE_NAMES = {
     2: ('dpsf', 'gvol'),
@@ -37,28 +43,445 @@ VARIABLE_NAMES = {
 }
 """Names of the normalised variables for the 2- and 4-variable problems [P eqs. 5, 7]."""
 
+DESIGN_SPACE_FILE = 'design_space.yaml'
+"""The design space's file in the configuration folder (config/)."""
+#: Spring variables the models know: a gas spring's static volume, a coil spring's rate.
+SPRING_QUANTITIES = ('volume', 'stiffness')
+AXLES = ('front', 'rear')
+
 
 @dataclass(frozen=True, eq=False)
 class AxleSettings:
-    """Physical 4S4 settings per axle for a batch of designs.
+    """Physical settings per axle for a batch of designs.
+
+    The spring of a design is either a gas spring (static gas volume, the 4S4 strut)
+    or a coil spring (rate); the other pair of arrays is None.
 
     Attributes
     ----------
     dpsf_front, dpsf_rear : np.ndarray
         Damper force scale factors, dimensionless, shape (batch,).
-    gas_volume_front_m3, gas_volume_rear_m3 : np.ndarray
+    gas_volume_front_m3, gas_volume_rear_m3 : np.ndarray or None
         Static gas volumes in m^3, shape (batch,).
+    stiffness_front_n_per_m, stiffness_rear_n_per_m : np.ndarray or None
+        Coil spring rates per strut in N/m, shape (batch,).
     """
 
     dpsf_front: np.ndarray
-    gas_volume_front_m3: np.ndarray
+    gas_volume_front_m3: np.ndarray | None
     dpsf_rear: np.ndarray
-    gas_volume_rear_m3: np.ndarray
+    gas_volume_rear_m3: np.ndarray | None
+    stiffness_front_n_per_m: np.ndarray | None = None
+    stiffness_rear_n_per_m: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        """Check that exactly one spring kind is given, on both axles."""
+        gas = (self.gas_volume_front_m3, self.gas_volume_rear_m3)
+        coil = (self.stiffness_front_n_per_m, self.stiffness_rear_n_per_m)
+        if not ((all(v is not None for v in gas) and all(v is None for v in coil))
+                or (all(v is None for v in gas) and all(v is not None for v in coil))):
+            raise ValueError('AxleSettings need either gas volumes or spring rates, on both '
+                             'axles')
 
     @property
     def batch_size(self) -> int:
         """Number of designs in the batch."""
         return int(np.shape(self.dpsf_front)[0])
+
+    @property
+    def spring_quantity(self) -> str:
+        """'volume' (gas springs) or 'stiffness' (coil springs)."""
+        return 'volume' if self.gas_volume_front_m3 is not None else 'stiffness'
+
+    def spring(self, axle: str) -> np.ndarray:
+        """The spring variable of ``axle`` ('front' or 'rear'), SI (m^3 or N/m)."""
+        if self.spring_quantity == 'volume':
+            value = self.gas_volume_front_m3 if axle == 'front' else self.gas_volume_rear_m3
+        else:
+            value = (self.stiffness_front_n_per_m if axle == 'front'
+                     else self.stiffness_rear_n_per_m)
+        return np.asarray(value, dtype=float)
+
+    def dpsf(self, axle: str) -> np.ndarray:
+        """The damper scale factor of ``axle`` ('front' or 'rear')."""
+        return np.asarray(self.dpsf_front if axle == 'front' else self.dpsf_rear, dtype=float)
+
+    @classmethod
+    def of(cls, dpsf: Mapping[str, np.ndarray], spring: Mapping[str, np.ndarray],
+           spring_quantity: str) -> AxleSettings:
+        """Settings from per-axle dpsf and spring arrays (SI) of a spring quantity."""
+        arrays = {axle: np.atleast_1d(np.asarray(spring[axle], dtype=float)).copy()
+                  for axle in AXLES}
+        dpsf_f = np.atleast_1d(np.asarray(dpsf['front'], dtype=float)).copy()
+        dpsf_r = np.atleast_1d(np.asarray(dpsf['rear'], dtype=float)).copy()
+        if spring_quantity == 'volume':
+            return cls(dpsf_f, arrays['front'], dpsf_r, arrays['rear'])
+        return cls(dpsf_f, None, dpsf_r, None, arrays['front'], arrays['rear'])
+
+
+@dataclass(frozen=True)
+class AxleRange:
+    """One axle's range and baseline of a design variable, SI."""
+
+    low: float
+    high: float
+    baseline: float
+
+
+@dataclass(frozen=True)
+class DesignVariable:
+    """One kind of design variable (the damper or the spring) on both axles.
+
+    Attributes
+    ----------
+    role : str
+        'damper' or 'spring'.
+    name : str
+        Its name in every report (``dpsf``, ``gas_volume``, ``spring_rate``...).
+    quantity : str
+        'dimensionless' (damper), 'volume' or 'stiffness' (spring).
+    unit : str
+        The unit it is given and shown in (a name of :data:`suspension_tuning.units.UNITS`).
+    front, rear : AxleRange
+        Range and baseline per axle, SI.
+    """
+
+    role: str
+    name: str
+    quantity: str
+    unit: str
+    front: AxleRange
+    rear: AxleRange
+
+    @property
+    def factor(self) -> float:
+        """SI value of one ``unit``."""
+        return UNITS[self.unit][1]
+
+    def in_unit(self, value_si: Any) -> Any:
+        """An SI value in the variable's unit (``1 / factor`` exact for L, kN/m...)."""
+        return value_si * (1.0 / self.factor)
+
+    def axle(self, axle: str) -> AxleRange:
+        """The range of ``axle`` ('front' or 'rear')."""
+        return self.front if axle == 'front' else self.rear
+
+    def label(self, axle: str | None = None) -> str:
+        """``name[_axle][_unit]``: ``gas_volume_front_l``, ``dpsf_rear``, ``gas_volume_l``."""
+        parts = [self.name, axle or '', unit_suffix(self.unit)]
+        return '_'.join(p for p in parts if p)
+
+    def key(self, axle: str) -> str:
+        """``name_axle`` (no unit): the key of the FMU mapping's design section."""
+        return f'{self.name}_{axle}'
+
+    def span(self, axle: str | None = None) -> str:
+        """``'0.1-0.6 L'``: the axle's range in the variable's unit, for messages."""
+        r = self.axle(axle or 'front')
+        unit = '' if UNITS[self.unit][0] == 'dimensionless' else f' {self.unit}'
+        return f'{self.in_unit(r.low):g}-{self.in_unit(r.high):g}{unit}'
+
+
+def _design_space_error(source: str, where: str, message: str) -> ValueError:
+    return ValueError(f'{source}: {where}: {message}')
+
+
+def _variable(role: str, d: Any, source: str) -> DesignVariable:
+    """Read and check the ``damper`` or ``spring`` section."""
+    allowed = ('name', 'unit', 'front', 'rear') + (('quantity',) if role == 'spring' else ())
+    if not isinstance(d, dict):
+        raise _design_space_error(source, role, 'expected a mapping with keys '
+                                  f'{list(allowed)}')
+    unknown = sorted(set(map(str, d)) - set(allowed))
+    missing = [k for k in allowed if k not in d and k != 'quantity']
+    if unknown or missing:
+        raise _design_space_error(source, role, (f'unknown key(s) {unknown}; ' if unknown
+                                                 else '') + (f'missing key(s) {missing}; '
+                                                             if missing else '')
+                                  + f'valid keys: {list(allowed)}')
+    name = d['name']
+    if not isinstance(name, str) or not name.isidentifier():
+        raise _design_space_error(source, f'{role}.name', f'expected a name of letters, digits '
+                                  f'and underscores, got {name!r}')
+    quantity = 'dimensionless' if role == 'damper' else str(d.get('quantity', 'volume'))
+    if role == 'spring' and quantity not in SPRING_QUANTITIES:
+        raise _design_space_error(source, 'spring.quantity', f'{quantity!r} is not one of '
+                                  f'{list(SPRING_QUANTITIES)}')
+    unit = str(d['unit'])
+    if unit not in UNITS or UNITS[unit][0] != quantity:
+        what = ('the damper variable is a scale factor' if role == 'damper'
+                else f'the spring quantity is {quantity}')
+        raise _design_space_error(source, f'{role}.unit', f'{unit!r} is not a unit of '
+                                  f'{quantity} ({what}; known units: {known_units(quantity)})')
+    factor = UNITS[unit][1]
+    ranges = {}
+    for axle in AXLES:
+        r = d[axle]
+        where = f'{role}.{axle}'
+        if not isinstance(r, dict) or set(r) != {'low', 'high', 'baseline'}:
+            raise _design_space_error(source, where, 'expected {low: ..., high: ..., '
+                                      f'baseline: ...}} in {unit}, got {r!r}')
+        values = {}
+        for k in ('low', 'high', 'baseline'):
+            v = r[k]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+                raise _design_space_error(source, f'{where}.{k}',
+                                          f'expected a finite number, got {v!r}')
+            values[k] = float(v)
+        if not 0.0 < values['low'] < values['high']:
+            raise _design_space_error(source, where, f'need 0 < low < high, got low '
+                                      f'{values["low"]:g} and high {values["high"]:g} {unit}')
+        if not values['low'] <= values['baseline'] <= values['high']:
+            raise _design_space_error(source, f'{where}.baseline', f'{values["baseline"]:g} '
+                                      f'lies outside {values["low"]:g}-{values["high"]:g} '
+                                      f'{unit}')
+        ranges[axle] = AxleRange(*(values[k] * factor for k in ('low', 'high', 'baseline')))
+    return DesignVariable(role, name, quantity, unit, ranges['front'], ranges['rear'])
+
+
+@dataclass(frozen=True)
+class DesignSpace:
+    """The design variables: names, units, ranges and baseline (config/design_space.yaml).
+
+    Attributes
+    ----------
+    damper, spring : DesignVariable
+        The damper scale factor and the spring variable, each on both axles.
+    source : str
+        Where it was read from, for messages.
+    """
+
+    damper: DesignVariable
+    spring: DesignVariable
+    source: str = DESIGN_SPACE_FILE
+
+    @classmethod
+    def from_mapping(cls, d: Any, source: str = DESIGN_SPACE_FILE) -> DesignSpace:
+        """Read and check a design space given as a parsed YAML mapping.
+
+        Raises
+        ------
+        ValueError
+            Unknown or missing keys, a unit that does not fit, a range with low >= high
+            or low <= 0, or a baseline outside its range; the message names the key.
+        """
+        if not isinstance(d, dict) or set(d) != {'damper', 'spring'}:
+            keys = sorted(d) if isinstance(d, dict) else type(d).__name__
+            raise ValueError(f'{source}: expected the sections damper and spring, got {keys}')
+        return cls(_variable('damper', d['damper'], source),
+                   _variable('spring', d['spring'], source), source)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The design space as config/design_space.yaml writes it (its own units)."""
+        def section(v: DesignVariable) -> dict[str, Any]:
+            out: dict[str, Any] = {'name': v.name, 'unit': v.unit}
+            if v.role == 'spring':
+                out['quantity'] = v.quantity
+            for axle in AXLES:
+                r = v.axle(axle)
+                out[axle] = {k: v.in_unit(getattr(r, k)) for k in ('low', 'high', 'baseline')}
+            return out
+        return {'damper': section(self.damper), 'spring': section(self.spring)}
+
+    def variables(self, n_vars: int) -> list[tuple[DesignVariable, str | None]]:
+        """The variables of an n-variable design in order, with their axle (None: both).
+
+        Raises
+        ------
+        ValueError
+            n_vars not 2 or 4, or a 2-variable design (eq. 5: both axles alike) of a
+            variable whose front and rear entries differ.
+        """
+        if n_vars not in VARIABLE_NAMES:
+            raise ValueError(f'n_vars must be 2 or 4 (paper section 5.1), got {n_vars!r}')
+        if n_vars == 4:
+            return [(self.damper, 'front'), (self.spring, 'front'), (self.damper, 'rear'),
+                    (self.spring, 'rear')]
+        for v in (self.damper, self.spring):
+            if v.front != v.rear:
+                raise ValueError(
+                    f'{self.source}: a 2-variable design (eq. 5) sets both axles alike, but '
+                    f'the front and rear entries of {v.name} differ ({v.span("front")}, '
+                    f'baseline {v.in_unit(v.front.baseline):g}; {v.span("rear")}, baseline '
+                    f'{v.in_unit(v.rear.baseline):g}): use 4 variables or make them equal')
+        return [(self.damper, None), (self.spring, None)]
+
+    def names(self, n_vars: int) -> tuple[str, ...]:
+        """Physical names of an n-variable design with units (``gas_volume_front_l``)."""
+        return tuple(v.label(axle) for v, axle in self.variables(n_vars))
+
+    def physical_names(self) -> tuple[str, ...]:
+        """The four per-axle names every report shows (a 2-variable design too)."""
+        return self.names(4)
+
+    def bounds(self, n_vars: int) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper physical bounds (n_vars,), SI."""
+        pairs = [(v.axle(axle or 'front').low, v.axle(axle or 'front').high)
+                 for v, axle in self.variables(n_vars)]
+        return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+
+    def to_physical(self, x: np.ndarray, n_vars: int | None = None) -> AxleSettings:
+        """Normalised designs to physical axle settings (inverse of eq. 4).
+
+        Parameters
+        ----------
+        x : array_like
+            Shape ``(n,)`` or ``(batch, n)`` with n = 2 (eq. 5) or 4 (eq. 7).
+        n_vars : int, optional
+            Expected number of variables; inferred from the last axis when omitted.
+
+        Returns
+        -------
+        AxleSettings
+            Arrays of shape (batch,).  A 2-variable design gives identical front and
+            rear settings (eq. 5).
+
+        Raises
+        ------
+        ValueError
+            As :func:`validate_design`, or as :meth:`variables`.
+        """
+        if n_vars is None:
+            shape = np.shape(x)
+            if len(shape) not in (1, 2) or shape[-1] not in VARIABLE_NAMES:
+                raise ValueError(
+                    'design must have shape (n,) or (batch, n) with n = 2 or 4 variables '
+                    f'(paper eqs. 5, 7), got shape {shape}'
+                )
+            n_vars = int(shape[-1])
+        arr = validate_design(x, n_vars)
+        low, high = self.bounds(n_vars)
+        v = denormalise(arr, low, high)
+        if n_vars == 2:
+            dpsf = {'front': v[:, 0], 'rear': v[:, 0]}
+            spring = {'front': v[:, 1], 'rear': v[:, 1]}
+        else:
+            dpsf = {'front': v[:, 0], 'rear': v[:, 2]}
+            spring = {'front': v[:, 1], 'rear': v[:, 3]}
+        return AxleSettings.of(dpsf, spring, self.spring.quantity)
+
+    def from_physical(self, settings: AxleSettings, n_vars: int) -> np.ndarray:
+        """Physical axle settings to normalised designs, eq. 4.
+
+        Returns
+        -------
+        np.ndarray
+            Shape (batch, n_vars).  Values are not clipped to ``[X_LOWER, X_UPPER]``:
+            the range's low end maps to x = 0 by eq. 4.
+
+        Raises
+        ------
+        ValueError
+            If n_vars is not 2 or 4, the spring is of another quantity, a value is not
+            finite or lies outside its range, or, for n_vars = 2, front and rear
+            settings differ.
+        """
+        self.variables(n_vars)  # checks n_vars (and equal axles for 2 variables)
+        if settings.spring_quantity != self.spring.quantity:
+            raise ValueError(f'the settings have a spring {settings.spring_quantity}, the '
+                             f'design space ({self.source}) a spring {self.spring.quantity}')
+        columns = {}
+        for axle in AXLES:
+            for var, value in ((self.damper, settings.dpsf(axle)),
+                               (self.spring, settings.spring(axle))):
+                r = var.axle(axle)
+                columns[(var.role, axle)] = _check_physical(
+                    var.label(axle), value, r.low, r.high, var, self.source)
+        shapes = {c.shape for c in columns.values()}
+        if len(shapes) != 1:
+            raise ValueError(f'AxleSettings arrays must share one batch shape, got {shapes}')
+        if n_vars == 2:
+            if not (np.array_equal(columns['damper', 'front'], columns['damper', 'rear'])
+                    and np.array_equal(columns['spring', 'front'], columns['spring', 'rear'])):
+                raise ValueError('a 2-variable design needs identical front and rear settings '
+                                 '(paper eq. 5); use n_vars=4')
+            order = [('damper', 'front'), ('spring', 'front')]
+        else:
+            order = [('damper', 'front'), ('spring', 'front'), ('damper', 'rear'),
+                     ('spring', 'rear')]
+        low, high = self.bounds(n_vars)
+        return normalise(np.stack([columns[k] for k in order], axis=1), low, high)
+
+    def baseline_settings(self) -> AxleSettings:
+        """The baseline vehicle's settings (batch of one)."""
+        return AxleSettings.of({a: self.damper.axle(a).baseline for a in AXLES},
+                               {a: self.spring.axle(a).baseline for a in AXLES},
+                               self.spring.quantity)
+
+    def baseline_x(self, n_vars: int) -> np.ndarray:
+        """The baseline vehicle as a normalised design (n_vars,)."""
+        return self.from_physical(self.baseline_settings(), n_vars)[0]
+
+    def physical_values(self, x: Any) -> dict[str, float]:
+        """One normalised design in physical units, by the four per-axle names.
+
+        Units at the edge: each value in its variable's unit (``gas_volume_front_l`` in
+        litres).  A 2-variable design gives front and rear alike.
+        """
+        settings = self.to_physical(np.asarray(x, dtype=float))
+        out = {}
+        for axle in AXLES:
+            out[self.damper.label(axle)] = self.damper.in_unit(float(settings.dpsf(axle)[0]))
+            out[self.spring.label(axle)] = self.spring.in_unit(float(settings.spring(axle)[0]))
+        return {name: out[name] for name in self.physical_names()}
+
+    def x_from_values(self, values: Mapping[str, float], n_vars: int) -> np.ndarray:
+        """A normalised design (n_vars,) from physical values by name, in their units.
+
+        Parameters
+        ----------
+        values : mapping
+            Every name of :meth:`names` (``dpsf``, ``gas_volume_l`` for 2 variables;
+            ``dpsf_front``, ``gas_volume_front_l``... for 4) to its value.
+
+        Returns
+        -------
+        np.ndarray
+            x by eq. 4; a value at the low end of its range (x = 0) is taken as the
+            paper's lower bound x = 0.001 (eqs. 6, 8).
+
+        Raises
+        ------
+        ValueError
+            A missing or unknown name, or a value outside its range (the message gives
+            the range in the variable's unit).
+        """
+        variables = self.variables(n_vars)
+        names = self.names(n_vars)
+        unknown = sorted(set(values) - set(names))
+        missing = [n for n in names if n not in values]
+        if unknown or missing:
+            raise ValueError(('unknown name(s) ' + ', '.join(unknown) + '; ' if unknown else '')
+                             + ('missing ' + ', '.join(missing) + '; ' if missing else '')
+                             + f'a {n_vars}-variable start needs ' + ', '.join(names)
+                             + f' ({self.source})')
+        x = []
+        for (var, axle), name in zip(variables, names):
+            r = var.axle(axle or 'front')
+            value = float(values[name]) * var.factor
+            if not np.isfinite(value) or not r.low <= value <= r.high:
+                raise ValueError(f'{name} = {values[name]!r} lies outside its range '
+                                 f'{var.span(axle)} ({self.source})')
+            x.append((value - r.low) / (r.high - r.low))
+        return np.clip(np.array(x), X_LOWER, X_UPPER)
+
+
+def load_design_space(path: str | Path | None = None) -> DesignSpace:
+    """The design space of config/design_space.yaml (or of ``path``).
+
+    Raises
+    ------
+    ValueError
+        The file is not a valid design space (see :meth:`DesignSpace.from_mapping`).
+    """
+    if path is None:
+        return DesignSpace.from_mapping(read_yaml(config_dir() / DESIGN_SPACE_FILE),
+                                        f'config/{DESIGN_SPACE_FILE}')
+    return DesignSpace.from_mapping(read_yaml(path), str(path))
+
+
+def _space(space: DesignSpace | None) -> DesignSpace:
+    return space if space is not None else load_design_space()
 
 
 def normalise(value: np.ndarray, low: float, high: float) -> np.ndarray:
@@ -149,7 +572,8 @@ def validate_design(x: np.ndarray, n_vars: int) -> np.ndarray:
     return arr
 
 
-def to_physical(x: np.ndarray, n_vars: int | None = None) -> AxleSettings:
+def to_physical(x: np.ndarray, n_vars: int | None = None,
+                space: DesignSpace | None = None) -> AxleSettings:
     """Convert normalised designs to physical axle settings (inverse of eq. 4).
 
     Parameters
@@ -158,6 +582,8 @@ def to_physical(x: np.ndarray, n_vars: int | None = None) -> AxleSettings:
         Shape ``(n,)`` or ``(batch, n)`` with n = 2 (eq. 5) or 4 (eq. 7).
     n_vars : int, optional
         Expected number of variables; inferred from the last axis when omitted.
+    space : DesignSpace, optional
+        The design space (default config/design_space.yaml).
 
     Returns
     -------
@@ -170,32 +596,11 @@ def to_physical(x: np.ndarray, n_vars: int | None = None) -> AxleSettings:
     ValueError
         As :func:`validate_design`.
     """
-    if n_vars is None:
-        shape = np.shape(x)
-        if len(shape) not in (1, 2) or shape[-1] not in VARIABLE_NAMES:
-            raise ValueError(
-                'design must have shape (n,) or (batch, n) with n = 2 or 4 variables '
-                f'(paper eqs. 5, 7), got shape {shape}'
-            )
-        n_vars = int(shape[-1])
-    arr = validate_design(x, n_vars)
-    if n_vars == 2:
-        dpsf_f = dpsf_r = denormalise(arr[:, 0], *DPSF_RANGE)
-        gvol_f = gvol_r = denormalise(arr[:, 1], *GVOL_RANGE_M3)
-    else:
-        dpsf_f = denormalise(arr[:, 0], *DPSF_RANGE)
-        gvol_f = denormalise(arr[:, 1], *GVOL_RANGE_M3)
-        dpsf_r = denormalise(arr[:, 2], *DPSF_RANGE)
-        gvol_r = denormalise(arr[:, 3], *GVOL_RANGE_M3)
-    return AxleSettings(
-        dpsf_front=dpsf_f.copy(),
-        gas_volume_front_m3=gvol_f.copy(),
-        dpsf_rear=dpsf_r.copy(),
-        gas_volume_rear_m3=gvol_r.copy(),
-    )
+    return _space(space).to_physical(x, n_vars)
 
 
-def _check_physical(name: str, value: np.ndarray, low: float, high: float) -> np.ndarray:
+def _check_physical(name: str, value: np.ndarray, low: float, high: float,
+                    var: DesignVariable, source: str) -> np.ndarray:
     arr = np.atleast_1d(np.asarray(value, dtype=float))
     if arr.ndim != 1:
         raise ValueError(f'{name} must be a 1-D array over the batch, got shape {arr.shape}')
@@ -206,14 +611,13 @@ def _check_physical(name: str, value: np.ndarray, low: float, high: float) -> np
     out = (arr < low) | (arr > high)
     if out.any():
         i = int(np.argmax(out))
-        raise ValueError(
-            f'{name}[{i}] = {arr[i]!r} is outside the 4S4 range [{low}, {high}] '
-            '(paper section 5.1)'
-        )
+        raise ValueError(f'{name}[{i}] = {var.in_unit(arr[i]):g} is outside its range '
+                         f'{var.in_unit(low):g}-{var.in_unit(high):g} {var.unit} ({source})')
     return arr
 
 
-def from_physical(settings: AxleSettings, n_vars: int) -> np.ndarray:
+def from_physical(settings: AxleSettings, n_vars: int,
+                  space: DesignSpace | None = None) -> np.ndarray:
     """Convert physical axle settings to normalised designs, eq. 4.
 
     Parameters
@@ -222,54 +626,24 @@ def from_physical(settings: AxleSettings, n_vars: int) -> np.ndarray:
         Physical settings, arrays of shape (batch,).
     n_vars : int
         2 (front and rear must then be equal, eq. 5) or 4 (eq. 7).
+    space : DesignSpace, optional
+        The design space (default config/design_space.yaml).
 
     Returns
     -------
     np.ndarray
         Shape (batch, n_vars).  Values are not clipped to ``[X_LOWER, X_UPPER]``: the
-        physical range end 0.1 maps to x = 0 by eq. 4.
+        range's low end maps to x = 0 by eq. 4.
 
     Raises
     ------
     ValueError
-        If n_vars is not 2 or 4, a value is not finite or lies outside the physical
-        range, or, for n_vars = 2, front and rear settings differ.
+        If n_vars is not 2 or 4, a value is not finite or lies outside its range, or,
+        for n_vars = 2, front and rear settings differ.
     """
-    if n_vars not in VARIABLE_NAMES:
-        raise ValueError(f'n_vars must be 2 or 4 (paper section 5.1), got {n_vars!r}')
-    df = _check_physical('dpsf_front', settings.dpsf_front, *DPSF_RANGE)
-    gf = _check_physical('gas_volume_front_m3', settings.gas_volume_front_m3, *GVOL_RANGE_M3)
-    dr = _check_physical('dpsf_rear', settings.dpsf_rear, *DPSF_RANGE)
-    gr = _check_physical('gas_volume_rear_m3', settings.gas_volume_rear_m3, *GVOL_RANGE_M3)
-    if not (df.shape == gf.shape == dr.shape == gr.shape):
-        raise ValueError(
-            'AxleSettings arrays must share one batch shape, got '
-            f'{df.shape}, {gf.shape}, {dr.shape}, {gr.shape}'
-        )
-    if n_vars == 2:
-        if not (np.array_equal(df, dr) and np.array_equal(gf, gr)):
-            raise ValueError(
-                'a 2-variable design needs identical front and rear settings (paper eq. 5); '
-                'use n_vars=4'
-            )
-        return np.stack([normalise(df, *DPSF_RANGE), normalise(gf, *GVOL_RANGE_M3)], axis=1)
-    return np.stack(
-        [
-            normalise(df, *DPSF_RANGE),
-            normalise(gf, *GVOL_RANGE_M3),
-            normalise(dr, *DPSF_RANGE),
-            normalise(gr, *GVOL_RANGE_M3),
-        ],
-        axis=1,
-    )
+    return _space(space).from_physical(settings, n_vars)
 
 
 def baseline_design(n_vars: int) -> np.ndarray:
-    """The standard vehicle's settings (config/scenarios.yaml) as a normalised design."""
-    from suspension_tuning.vehicle.params import load_scenarios_config
-
-    base = load_scenarios_config()['baseline_design']
-    gas = float(base['gas_volume_l']) * 1e-3
-    settings = AxleSettings(*(np.array([v]) for v in (float(base['dpsf']), gas,
-                                                       float(base['dpsf']), gas)))
-    return from_physical(settings, n_vars)[0]
+    """The baseline vehicle's settings (config/design_space.yaml) as a normalised design."""
+    return load_design_space().baseline_x(n_vars)

@@ -131,7 +131,9 @@ class SuspensionSetting:
         Parameters
         ----------
         axle_settings : design.AxleSettings
-            Physical design (dpsf and gas volume front/rear, each (batch,)).
+            Physical design (dpsf and gas volume front/rear, each (batch,)); a design
+            whose spring is a stiffness is refused (ValueError): the 4S4 strut has gas
+            springs.
         mode : {'ride', 'handling'}
             'ride': the design sets the soft gas volume and the low-damping dpsf;
             'handling': the stiff gas volume and the high-damping dpsf.  The other state
@@ -140,6 +142,11 @@ class SuspensionSetting:
         params : VehicleParams
             Parameters (baseline settings).
         """
+        if axle_settings.spring_quantity != 'volume':
+            raise ValueError(
+                "the built-in 4S4 model's springs are gas springs (a static gas volume per "
+                'axle); a design space whose spring is a stiffness (config/design_space.yaml) '
+                'needs a full model of a coil-sprung vehicle: run it as an FMU (docs/fmu.md)')
         dpsf = np.stack([axle_settings.dpsf_front, axle_settings.dpsf_rear], axis=1)
         gvol = np.stack(
             [axle_settings.gas_volume_front_m3, axle_settings.gas_volume_rear_m3], axis=1

@@ -37,7 +37,7 @@ import numpy as np
 
 from . import _simplified_kernel as SK  # noqa: N812
 from . import strut as strut_mod
-from .design import AxleSettings, to_physical, validate_design
+from .design import AxleSettings, DesignSpace, to_physical, validate_design
 from .metrics import (
     FZ_CONTACT_THRESHOLD_N,
     f_hand,
@@ -241,9 +241,12 @@ class HandlingModel:
         )
 
     def evaluate(
-        self, x: np.ndarray, n_vars: int, inputs: HandlingInputs
+        self, x: np.ndarray, n_vars: int, inputs: HandlingInputs,
+        space: DesignSpace | None = None,
     ) -> dict[str, np.ndarray]:
         """Objective eq. 10 and constraints eq. 11 for normalised designs.
+
+        ``space``: the design space (default config/design_space.yaml).
 
         Returns
         -------
@@ -252,7 +255,7 @@ class HandlingModel:
             'roll_rate_rms_deg_s' (batch,).
         """
         xb = validate_design(x, n_vars)
-        rec = self.simulate(to_physical(xb), inputs)
+        rec = self.simulate(to_physical(xb, n_vars, space), inputs)
         p = self.params
         static = np.array([p.static_tyre_load_front_n, p.static_tyre_load_front_n,
                            p.static_tyre_load_rear_n, p.static_tyre_load_rear_n])
@@ -334,14 +337,18 @@ def derivative_numpy(
     ts2 = 0.5 * p.strut_track_m
     f_s, r_s = p.static_strut_load_front_n, p.static_strut_load_rear_n
 
-    def sf(x, xd, vol, dpsf, load):
-        return strut_mod.strut_force(x, xd, vol, dpsf, load, p)
+    coil = settings.spring_quantity == 'stiffness'
+
+    def sf(x, xd, axle, load):
+        spring = settings.spring(axle)
+        return strut_mod.strut_force(x, xd, None if coil else spring, settings.dpsf(axle),
+                                     load, p, spring if coil else None)
 
     xl, xld = -ts2 * phi, -ts2 * phid
-    f_fl = sf(xl, xld, settings.gas_volume_front_m3, settings.dpsf_front, f_s)
-    f_fr = sf(-xl, -xld, settings.gas_volume_front_m3, settings.dpsf_front, f_s)
-    f_rl = sf(xl, xld, settings.gas_volume_rear_m3, settings.dpsf_rear, r_s)
-    f_rr = sf(-xl, -xld, settings.gas_volume_rear_m3, settings.dpsf_rear, r_s)
+    f_fl = sf(xl, xld, 'front', f_s)
+    f_fr = sf(-xl, -xld, 'front', f_s)
+    f_rl = sf(xl, xld, 'rear', r_s)
+    f_rr = sf(-xl, -xld, 'rear', r_s)
     fl, fr = f_fl + f_rl, f_fr + f_rr
     shf, shr = f_s / (f_s + r_s), r_s / (f_s + r_s)
     waf, war = 0.5 * p.mass_axle_front_kg * p.g_mps2, 0.5 * p.mass_axle_rear_kg * p.g_mps2

@@ -2,6 +2,8 @@
 
 * :func:`f_ride` - eq. 9, scaled BS 6841 weighted RMS vertical accelerations.
 * :func:`f_hand` - eq. 10, scaled RMS roll velocity and first peak roll angle.
+* :func:`objective_scaling` - the reference values of eqs. 9 and 10 from
+  config/scenarios.yaml (the paper's by default).
 * :func:`tyre_hop_constraints` - eq. 11, fraction of time each tyre is off the ground.
 * :func:`soft_tyre_hop_constraints` - a measure of tyre hop that is smooth in the
   design, for gradients only (a departure from the paper, see its docstring).
@@ -151,11 +153,39 @@ def first_peak(
     return np.where(has, first, peak_max)
 
 
+def objective_scaling(scenario: str) -> dict[str, float]:
+    """The reference values that normalise eq. 9 ('ride') or eq. 10 ('handling').
+
+    From config/scenarios.yaml ``<scenario>.objective_scaling`` (the paper's values:
+    0.7 and 4.4 m/s^2 for eq. 9; 0.8-5.7 deg/s and 1.4-12.2 deg for eq. 10), as the
+    keyword arguments of :func:`f_ride` or :func:`f_hand`.
+
+    Raises
+    ------
+    ValueError
+        A missing or non-numeric value (the message names the key).
+    """
+    from .params import load_scenarios_config
+
+    keys = {'ride': ('a_min_mps2', 'a_max_mps2'),
+            'handling': ('roll_rate_min_deg_s', 'roll_rate_max_deg_s', 'roll_peak_min_deg',
+                         'roll_peak_max_deg')}[scenario]
+    section = (load_scenarios_config().get(scenario) or {}).get('objective_scaling') or {}
+    out = {}
+    for key in keys:
+        value = section.get(key)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f'config/scenarios.yaml {scenario}.objective_scaling.{key}: '
+                             f'expected a number, got {value!r}')
+        out[key] = float(value)
+    return out
+
+
 def f_ride(
     a_rms_driver_mps2: np.ndarray,
     a_rms_passenger_mps2: np.ndarray,
-    a_min: float = 0.7,
-    a_max: float = 4.4,
+    a_min: float | None = None,
+    a_max: float | None = None,
 ) -> np.ndarray:
     """Compute the ride comfort objective, eq. 9.
 
@@ -165,14 +195,19 @@ def f_ride(
     ----------
     a_rms_driver_mps2, a_rms_passenger_mps2 : array_like
         BS 6841 W_b weighted RMS vertical accelerations in m/s^2 (driver, passenger).
-    a_min, a_max : float
-        Scaling range in m/s^2, the paper's corner values 0.7 and 4.4 [P].
+    a_min, a_max : float, optional
+        Scaling range in m/s^2; default config/scenarios.yaml ``ride.objective_scaling``
+        (the paper's corner values 0.7 and 4.4 [P]).
 
     Returns
     -------
     np.ndarray
         Scaled objective (0 at a_min, 1 at a_max).
     """
+    if a_min is None or a_max is None:
+        scaling = objective_scaling('ride')
+        a_min = scaling['a_min_mps2'] if a_min is None else a_min
+        a_max = scaling['a_max_mps2'] if a_max is None else a_max
     if a_max <= a_min:
         raise ValueError(f'a_max ({a_max}) must exceed a_min ({a_min})')
     ad = np.asarray(a_rms_driver_mps2, dtype=float)
@@ -184,16 +219,16 @@ def f_ride(
 def f_hand(
     roll_rate_rms_deg_s: np.ndarray,
     roll_first_peak_deg: np.ndarray,
-    rate_min_deg_s: float = 0.8,
-    rate_max_deg_s: float = 5.7,
-    peak_min_deg: float = 1.4,
-    peak_max_deg: float = 12.2,
+    rate_min_deg_s: float | None = None,
+    rate_max_deg_s: float | None = None,
+    peak_min_deg: float | None = None,
+    peak_max_deg: float | None = None,
 ) -> np.ndarray:
     """Compute the handling objective, eq. 10.
 
     ``f_hand = ((r - 0.8) 0.9/(5.7 - 0.8) + 0.1 + (p - 1.4) 0.9/(12.2 - 1.4) + 0.1) / 2``
-    with r the RMS roll velocity (deg/s) and p the first peak roll angle (deg).  Each term
-    is 0.1 at its minimum and 1.0 at its maximum.
+    (the paper's ranges) with r the RMS roll velocity (deg/s) and p the first peak roll
+    angle (deg).  Each term is 0.1 at its minimum and 1.0 at its maximum.
 
     Parameters
     ----------
@@ -201,14 +236,23 @@ def f_hand(
         RMS roll velocity over the whole double lane change, deg/s.
     roll_first_peak_deg : array_like
         First peak roll angle in the first lane change, deg.
-    rate_min_deg_s, rate_max_deg_s, peak_min_deg, peak_max_deg : float
-        Scaling ranges [P eq. 10].
+    rate_min_deg_s, rate_max_deg_s, peak_min_deg, peak_max_deg : float, optional
+        Scaling ranges; default config/scenarios.yaml ``handling.objective_scaling``
+        (the paper's 0.8, 5.7, 1.4 and 12.2 [P eq. 10]).
 
     Returns
     -------
     np.ndarray
         Scaled objective.
     """
+    if None in (rate_min_deg_s, rate_max_deg_s, peak_min_deg, peak_max_deg):
+        scaling = objective_scaling('handling')
+        rate_min_deg_s = scaling['roll_rate_min_deg_s'] if rate_min_deg_s is None \
+            else rate_min_deg_s
+        rate_max_deg_s = scaling['roll_rate_max_deg_s'] if rate_max_deg_s is None \
+            else rate_max_deg_s
+        peak_min_deg = scaling['roll_peak_min_deg'] if peak_min_deg is None else peak_min_deg
+        peak_max_deg = scaling['roll_peak_max_deg'] if peak_max_deg is None else peak_max_deg
     if rate_max_deg_s <= rate_min_deg_s or peak_max_deg <= peak_min_deg:
         raise ValueError('f_hand scaling ranges must have max > min')
     r = np.asarray(roll_rate_rms_deg_s, dtype=float)

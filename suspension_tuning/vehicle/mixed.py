@@ -130,7 +130,8 @@ def run_mixed(x: np.ndarray, controllers: list[Controller] | None = None,
               params: VehicleParams | None = None, config: dict[str, Any] | None = None,
               valve_period_s: float | None = None,
               setting: SuspensionSetting | None = None,
-              road: str | None = None) -> ScenarioResult:
+              road: str | None = None,
+              space: design.DesignSpace | None = None) -> ScenarioResult:
     """Simulate the mixed scenario with closed-loop valve control.
 
     Parameters
@@ -152,6 +153,8 @@ def run_mixed(x: np.ndarray, controllers: list[Controller] | None = None,
         x is then only recorded.
     road : str, optional
         The rough road in place of the ride scenario's (:func:`mixed_road`).
+    space : DesignSpace, optional
+        The design space (default config/design_space.yaml).
 
     Returns
     -------
@@ -175,7 +178,8 @@ def run_mixed(x: np.ndarray, controllers: list[Controller] | None = None,
     if abs(steps_per_period * params.dt_s - period) > 1e-12:
         raise ValueError(f'valve period {period} s is not a multiple of dt {params.dt_s} s')
     if setting is None:
-        setting = SuspensionSetting.from_design(design.to_physical(xv, n_vars), 'ride', params)
+        setting = SuspensionSetting.from_design(design.to_physical(xv, n_vars, space), 'ride',
+                                             params)
     elif setting.batch_size != batch:
         raise ValueError(f'setting has {setting.batch_size} designs, x has {batch}')
     track, driver, speed_ctrl, _ = handling_setup(params, load_scenarios_config()['handling'])

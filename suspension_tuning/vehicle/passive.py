@@ -37,6 +37,9 @@ from suspension_tuning.vehicle.full_model import SuspensionSetting
 def _axles(x: np.ndarray, n_vars: int | None) -> tuple[np.ndarray, np.ndarray]:
     n = int(np.shape(x)[-1]) if n_vars is None else n_vars
     phys = design.to_physical(design.validate_design(x, n), n)
+    if phys.spring_quantity != 'volume':
+        raise ValueError('passive and switched 4S4 settings need gas springs; the design '
+                         'space (config/design_space.yaml) has a spring stiffness')
     dpsf = np.stack([phys.dpsf_front, phys.dpsf_rear], axis=1)
     gvol = np.stack([phys.gas_volume_front_m3, phys.gas_volume_rear_m3], axis=1)
     return dpsf, gvol

@@ -45,7 +45,7 @@ from suspension_tuning.paths import read_yaml
 from . import _simplified_kernel as SK  # noqa: N812
 from . import strut as strut_mod
 from .comfort import weighted_rms
-from .design import AxleSettings, to_physical, validate_design
+from .design import AxleSettings, DesignSpace, to_physical, validate_design
 from .full_model import RoadInput
 from .metrics import f_ride, soft_tyre_hop_constraints, tyre_hop_constraints
 from .params import CONFIG_DIR, VehicleParams, load_scenarios_config, load_vehicle_params
@@ -89,22 +89,29 @@ def strut_block(params: VehicleParams) -> np.ndarray:
 
 
 def axle_strut_states(settings: AxleSettings, params: VehicleParams) -> np.ndarray:
-    """Per-design, per-axle strut state (batch, 2, 4): K, V_s, guard volume, dpsf.
+    """Per-design, per-axle strut state (batch, 2, 6): K, V_s, guard volume, dpsf, k, F_s.
 
-    ``K = V_s p_s^(1/n)`` with the static pressure of ``strut.static_pressure_pa`` at the
-    axle's static strut load, so the gas force equals that load at zero stroke (as in
-    ``strut.gas_force_n``).
+    Gas spring: ``K = V_s p_s^(1/n)`` with the static pressure of
+    ``strut.static_pressure_pa`` at the axle's static strut load, so the gas force equals
+    that load at zero stroke (as in ``strut.gas_force_n``); the coil rate k is 0.  Coil
+    spring (a design space whose spring is a stiffness): k and the static load F_s
+    (``strut.coil_force_n``), the gas entries unused.
     """
     sp = params.strut
     loads = np.array([params.static_strut_load_front_n, params.static_strut_load_rear_n])
+    dpsf = np.stack([settings.dpsf_front, settings.dpsf_rear], axis=1)
+    out = np.zeros(dpsf.shape + (SK.N_SS,))
+    out[..., SK.SS_DPSF] = dpsf
+    if settings.spring_quantity == 'stiffness':
+        out[..., SK.SS_KC] = np.stack([settings.spring('front'), settings.spring('rear')], axis=1)
+        out[..., SK.SS_F0] = loads
+        out[..., SK.SS_K] = out[..., SK.SS_V] = 1.0  # unused by the coil spring
+        return np.ascontiguousarray(out)
     p_s = strut_mod.static_pressure_pa(loads, sp)
     vol = np.stack([settings.gas_volume_front_m3, settings.gas_volume_rear_m3], axis=1)
-    dpsf = np.stack([settings.dpsf_front, settings.dpsf_rear], axis=1)
-    out = np.empty(vol.shape + (4,))
     out[..., SK.SS_K] = vol * p_s ** (1.0 / sp.polytropic_exponent)
     out[..., SK.SS_V] = vol
     out[..., SK.SS_VG] = sp.min_volume_fraction * vol
-    out[..., SK.SS_DPSF] = dpsf
     return np.ascontiguousarray(out)
 
 
@@ -310,7 +317,8 @@ class PitchPlaneModel:
             road_m=np.stack([zf[0:-1:2], zr[0:-1:2]]),
         )
 
-    def evaluate(self, x: np.ndarray, n_vars: int) -> dict[str, np.ndarray]:
+    def evaluate(self, x: np.ndarray, n_vars: int,
+                 space: DesignSpace | None = None) -> dict[str, np.ndarray]:
         """Objective eq. 9 and constraints eq. 11 for normalised designs.
 
         Parameters
@@ -319,6 +327,8 @@ class PitchPlaneModel:
             Designs, shape (n_vars,) or (batch, n_vars), in [0.001, 1] (eqs. 5-8).
         n_vars : int
             2 or 4.
+        space : DesignSpace, optional
+            The design space (default config/design_space.yaml).
 
         Returns
         -------
@@ -327,7 +337,7 @@ class PitchPlaneModel:
             'a_rms_driver_mps2', 'a_rms_passenger_mps2' (batch,).
         """
         xb = validate_design(x, n_vars)
-        rec = self.simulate(to_physical(xb))
+        rec = self.simulate(to_physical(xb, n_vars, space))
         static = np.array([self.params.static_tyre_load_front_n,
                            self.params.static_tyre_load_rear_n])
         return ride_metrics(rec, self.setup.settle_s, static, self.soft_load_fraction)
@@ -393,11 +403,11 @@ def derivative_numpy(
     dstf, dstr = static_tyre_deflections_m(p)
     ff = strut_mod.strut_force(
         zaf - (zs - a * th), zafd - (zsd - a * thd), settings.gas_volume_front_m3,
-        settings.dpsf_front, p.static_strut_load_front_n, p,
+        settings.dpsf_front, p.static_strut_load_front_n, p, settings.stiffness_front_n_per_m,
     )  # fmt: skip
     fr = strut_mod.strut_force(
         zar - (zs + b * th), zard - (zsd + b * thd), settings.gas_volume_rear_m3,
-        settings.dpsf_rear, p.static_strut_load_rear_n, p,
+        settings.dpsf_rear, p.static_strut_load_rear_n, p, settings.stiffness_rear_n_per_m,
     )  # fmt: skip
     k, c = p.tyre.vertical_stiffness_n_per_m, p.tyre.vertical_damping_ns_per_m
     tf = vertical_force(dstf + road[0] - zaf, road[1] - zafd, k, c)
@@ -429,9 +439,9 @@ def linear_mass_stiffness(
         Diagonal mass matrix diag(m_b, I_y, m_tf, m_tr) and stiffness (N/m, N m/rad).
     """
     p = params if params is not None else load_vehicle_params()
-    one = AxleSettings(*(np.atleast_1d(np.asarray(v, dtype=float))[:1] for v in (
-        settings.dpsf_front, settings.gas_volume_front_m3, settings.dpsf_rear,
-        settings.gas_volume_rear_m3)))  # fmt: skip
+    one = AxleSettings.of({a: settings.dpsf(a)[:1] for a in ('front', 'rear')},
+                          {a: settings.spring(a)[:1] for a in ('front', 'rear')},
+                          settings.spring_quantity)
     M = np.diag([p.mass_sprung_kg, p.i_pitch_sprung_kgm2, p.mass_axle_front_kg,
                  p.mass_axle_rear_kg])  # fmt: skip
     eps = 1e-7

@@ -130,12 +130,13 @@ def _check_name(name: str) -> None:
 
 
 def _settings(
-    name: str, x: np.ndarray, n_vars: int | None, params: VehicleParams
+    name: str, x: np.ndarray, n_vars: int | None, params: VehicleParams,
+    space: design.DesignSpace | None = None,
 ) -> tuple[np.ndarray, SuspensionSetting]:
     if n_vars is None:
         n_vars = int(np.shape(x)[-1]) if np.ndim(x) >= 1 else -1
     xv = design.validate_design(x, n_vars)
-    phys = design.to_physical(xv, n_vars)
+    phys = design.to_physical(xv, n_vars, space)
     return xv, SuspensionSetting.from_design(phys, name, params)
 
 
@@ -147,6 +148,7 @@ def run_scenario(
     config: dict | None = None,
     integrator: str | None = None,
     step_log_capacity: int = 0,
+    space: design.DesignSpace | None = None,
 ) -> ScenarioResult:
     """Simulate a scenario for one or many designs.
 
@@ -169,6 +171,9 @@ def run_scenario(
     step_log_capacity : int
         Variable-step integrator: accepted steps logged per design (time, size) into
         ``result.integrator['stats']`` (0 = none).
+    space : DesignSpace, optional
+        The design space that turns x into physical settings (default
+        config/design_space.yaml).
 
     Returns
     -------
@@ -183,7 +188,7 @@ def run_scenario(
     _check_name(name)
     params = with_integrator(params if params is not None else load_vehicle_params(), integrator)
     cfg = config if config is not None else load_scenarios_config()
-    xv, setting = _settings(name, x, n_vars, params)
+    xv, setting = _settings(name, x, n_vars, params, space)
     if name == 'ride':
         return _run_ride(
             xv, setting, params, cfg['ride'], cfg['handling']['speed_controller'],

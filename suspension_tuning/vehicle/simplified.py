@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .design import DesignSpace
 from .handling_model import HandlingInputs, HandlingModel
 from .pitch_plane import PitchPlaneModel
 
@@ -103,6 +104,7 @@ def handling_model() -> HandlingModel:
 def run_simplified(
     scenario: str, x: np.ndarray, n_vars: int, inputs: SimplifiedInputs | None = None,
     road: str = '',
+    space: DesignSpace | None = None,
 ) -> dict[str, np.ndarray]:
     """Evaluate the simplified model of a scenario for a batch of designs.
 
@@ -118,6 +120,8 @@ def run_simplified(
         Required for 'handling' (captured from the full model's run).
     road : str
         Ride road in place of the configured one (:func:`pitch_plane_model`).
+    space : DesignSpace, optional
+        The design space (default config/design_space.yaml).
 
     Returns
     -------
@@ -129,9 +133,9 @@ def run_simplified(
             f'unknown scenario {scenario!r}; valid: {", ".join(SIMPLIFIED_SCENARIOS)}'
         )
     if scenario == 'ride':
-        return pitch_plane_model(road).evaluate(x, n_vars)
+        return pitch_plane_model(road).evaluate(x, n_vars, space)
     if inputs is None or inputs.handling is None:
         raise ValueError('the handling model needs SimplifiedInputs from a full handling run')
     if inputs.scenario != 'handling':
         raise ValueError(f'inputs are for scenario {inputs.scenario!r}, not handling')
-    return handling_model().evaluate(x, n_vars, inputs.handling)
+    return handling_model().evaluate(x, n_vars, inputs.handling, space)

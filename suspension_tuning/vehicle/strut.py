@@ -12,6 +12,11 @@ one pressure, so the connected gas volume ``V_c = sum_j V_j`` gives the closed f
 changes ``V_ref`` (and which K_j are summed): a disconnected accumulator keeps its gas
 (volume frozen), and on reconnection the pressures equalise isentropically per gas mass,
 which is exactly the closed form above with unchanged K_j.
+
+Coil spring.  A design space whose spring is a stiffness (a coil-sprung vehicle run as
+an FMU, config/design_space.yaml) gives the simplified models a linear spring
+``F = F_s + k x`` in place of the gas spring: the same static load at zero stroke, the
+design's rate k.
 """
 
 from __future__ import annotations
@@ -97,6 +102,14 @@ def gas_stiffness_n_per_m(
     return sp.polytropic_exponent * p_s * sp.piston_area_m2**2 / np.asarray(gas_volume_m3)
 
 
+def coil_force_n(
+    stroke_m: np.ndarray, stiffness_n_per_m: np.ndarray, static_load_n: np.ndarray
+) -> np.ndarray:
+    """Linear (coil) spring force of one strut [N]: ``F = F_s + k x``, compression positive."""
+    return np.asarray(static_load_n, dtype=float) + np.asarray(stiffness_n_per_m) * np.asarray(
+        stroke_m, dtype=float)
+
+
 def damper_knot_slopes(params: StrutParams | VehicleParams) -> np.ndarray:
     """PCHIP slopes at the damper-table knots [N s/m] (shared with the compiled kernel)."""
     sp = _strut(params)
@@ -172,6 +185,7 @@ def strut_force(
     dpsf: np.ndarray,
     static_load_n: np.ndarray,
     params: StrutParams | VehicleParams,
+    stiffness_n_per_m: np.ndarray | None = None,
 ) -> np.ndarray:
     """Total 4S4 strut force [N] for one connected gas volume and one damper scale.
 
@@ -190,14 +204,20 @@ def strut_force(
         Static strut load [N]; the force equals it at zero stroke and rate.
     params : StrutParams or VehicleParams
         Strut parameters.
+    stiffness_n_per_m : np.ndarray, optional
+        A coil spring's rate [N/m]: the spring is then linear (:func:`coil_force_n`) and
+        ``gas_volume_m3`` is not used.
 
     Returns
     -------
     np.ndarray
         Force [N], positive pushing axle and body apart (broadcast shape of the inputs).
     """
+    spring = (gas_force_n(stroke_m, gas_volume_m3, static_load_n, params)
+              if stiffness_n_per_m is None
+              else coil_force_n(stroke_m, stiffness_n_per_m, static_load_n))
     return (
-        gas_force_n(stroke_m, gas_volume_m3, static_load_n, params)
+        spring
         + damper_force_n(stroke_rate_mps, dpsf, params)
         + stop_force_n(stroke_m, params)
     )
