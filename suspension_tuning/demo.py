@@ -24,10 +24,6 @@ if os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] != 'LOCALHOST':
     sys.exit('demo: ROS_AUTOMATIC_DISCOVERY_RANGE must be LOCALHOST (DDS stays on loopback)')
 os.environ.setdefault('ROS_DOMAIN_ID', '42')
 
-import numpy as np  # noqa: E402
-
-from suspension_tuning.vehicle.design import baseline_design  # noqa: E402
-
 
 def optimiser_stopped(message: str) -> bool:
     """True if a goal's result message ends in one of Dynamic-Q's own stops.
