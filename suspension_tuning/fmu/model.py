@@ -217,17 +217,27 @@ class FmuModel:
                 from None
 
     # ------------------------------------------------------------------ checks
-    def _check(self, ref, causalities, units, problems) -> Conversion:
+    def _variable(self, ref, causalities, problems) -> tuple[Any, list[str], str | None]:
+        """The FMU variable ``ref`` names, its causality and type problems, its unit.
+
+        A missing variable is a problem of its own (listed in ``problems``): None.
+        """
         v = self.variables.get(ref.name)
         if v is None:
             problems.append(f'{ref.where}: the FMU has no variable {ref.name!r}')
-            return Conversion('')
+            return None, [], None
         bad = []
         if v.causality not in causalities:
             bad.append(f'causality {v.causality!r}, expected {" or ".join(causalities)}')
         if v.type not in REAL_TYPES:
             bad.append(f'type {v.type}, expected a real ({", ".join(REAL_TYPES)})')
         declared = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
+        return v, bad, declared
+
+    def _check(self, ref, causalities, units, problems) -> Conversion:
+        v, bad, declared = self._variable(ref, causalities, problems)
+        if v is None:
+            return Conversion('')
         if not declared and ref.quantity != 'dimensionless':
             self.undeclared_units.append(f'{ref.where} ({ref.name}, taken as '
                                          f'{ref.unit or "SI"})')
@@ -249,16 +259,9 @@ class FmuModel:
         this tool converts (else the problem is listed).  Returned as the affine
         :class:`Conversion` from the variable's SI value to the FMU's value.
         """
-        v = self.variables.get(ref.name)
+        v, bad, declared = self._variable(ref, PARAMETER_CAUSALITIES, problems)
         if v is None:
-            problems.append(f'{ref.where}: the FMU has no variable {ref.name!r}')
             return Conversion('')
-        bad = []
-        if v.causality not in PARAMETER_CAUSALITIES:
-            bad.append(f'causality {v.causality!r}, expected parameter')
-        if v.type not in REAL_TYPES:
-            bad.append(f'type {v.type}, expected a real ({", ".join(REAL_TYPES)})')
-        declared = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
         to_declared = 1.0  # FMU value per value in the mapping's unit
         shift = 0.0
         if declared and declared != ref.unit:
