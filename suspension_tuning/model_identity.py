@@ -30,6 +30,7 @@ from typing import Any
 
 import yaml
 
+from suspension_tuning.paths import file_sha256
 from suspension_tuning.vehicle.params import CONFIG_DIR
 
 #: Version of the fingerprint's recipe: a change of what it covers changes every value.
@@ -55,14 +56,6 @@ IDENTITY_KEYS = ('model', 'fmu_sha256', 'mapping_content', 'config_sha256', 'roa
 BUILTIN_NAME = 'Land Rover Defender 110, 4S4 (built-in full model)'
 
 
-def _sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, 'rb') as f:
-        for block in iter(lambda: f.read(1 << 20), b''):
-            h.update(block)
-    return h.hexdigest()
-
-
 def road_files(config_dir: str | Path | None = None) -> dict[str, str]:
     """SHA-256 of each file a road of config/road.yaml names (``file`` key), by road.
 
@@ -79,7 +72,7 @@ def road_files(config_dir: str | Path | None = None) -> dict[str, str]:
         if isinstance(spec, dict) and spec.get('file'):
             file = Path(str(spec['file']))
             file = file if file.is_absolute() else d / file
-            out[str(name)] = _sha256_file(file) if file.is_file() else 'missing'
+            out[str(name)] = file_sha256(file) if file.is_file() else 'missing'
     return out
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import functools
+import hashlib
 from pathlib import Path
 from typing import Any
 
@@ -61,3 +62,12 @@ def dump_yaml(data: Any) -> str:
     """
     dumper = getattr(yaml, 'CSafeDumper', yaml.SafeDumper)
     return yaml.dump(data, Dumper=dumper, sort_keys=False)
+
+
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 (hex) of a file's bytes, read in 1 MiB blocks (FMUs, road files)."""
+    h = hashlib.sha256()
+    with open(path, 'rb') as f:
+        for block in iter(lambda: f.read(1 << 20), b''):
+            h.update(block)
+    return h.hexdigest()

@@ -36,9 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
+from suspension_tuning.paths import file_sha256
 from suspension_tuning.vehicle import road as road_mod
 from suspension_tuning.vehicle import road_analysis as ra
-from suspension_tuning.vehicle.road_files import FileRoadSpec, file_sha256, write_crg, write_csv
+from suspension_tuning.vehicle.road_files import FileRoadSpec, write_crg, write_csv
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:

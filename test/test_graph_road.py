@@ -39,7 +39,7 @@ def test_ride_optimisation_through_the_graph_on_crg_and_csv_road_files(
 
     from suspension_tuning.graph import SpinningGraph, build_nodes
     from suspension_tuning.inspect_bag import summary
-    from suspension_tuning.vehicle.road_files import file_sha256
+    from suspension_tuning.paths import file_sha256
 
     nodes = build_nodes(workers=1, record=True, context=ros_context, overrides={
         'gradient_evaluator': [Parameter('calibration_dir', value=str(tmp_path / 'cal'))],

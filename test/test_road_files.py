@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from suspension_tuning.paths import config_dir
+from suspension_tuning.paths import config_dir, file_sha256
 from suspension_tuning.vehicle import road as road_mod
 from suspension_tuning.vehicle import road_files as rf
 
@@ -195,7 +195,7 @@ def test_road_names_files_and_entries_resolve_the_same_way(tmp_path):
         road_mod.synthesise_tracks(road_mod.resolve_road(str(tmp_path / 'missing.crg')))
     # the run configuration's record: the file and its hash
     identity = road_mod.road_identity(str(BLOCK))
-    assert identity['file'] == str(BLOCK) and identity['sha256'] == rf.file_sha256(BLOCK)
+    assert identity['file'] == str(BLOCK) and identity['sha256'] == file_sha256(BLOCK)
 
 
 def test_crg_pitch_plane_model_drives_the_left_right_average(tmp_path):

@@ -25,7 +25,6 @@ can be stopped.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import shutil
 import tempfile
@@ -44,6 +43,7 @@ from suspension_tuning.fmu.fmi_log import FmuLog, FmuMessage
 from suspension_tuning.fmu.mapping import CORNERS, FmuMapping, ScenarioMapping, load_mapping
 from suspension_tuning.fmu.units import UNITS, Conversion, resolve
 from suspension_tuning.model_identity import with_fingerprint
+from suspension_tuning.paths import file_sha256
 from suspension_tuning.vehicle import design as design_mod
 from suspension_tuning.vehicle import road as road_mod
 from suspension_tuning.vehicle import scenarios as scen
@@ -203,8 +203,7 @@ class FmuModel:
                 is None:
             self._track = scen.handling_setup(load_vehicle_params(),
                                               load_scenarios_config()['handling'])[0]
-        with open(self.path, 'rb') as f:
-            self.sha256 = hashlib.sha256(f.read()).hexdigest()
+        self.sha256 = file_sha256(self.path)
         self._unzipdir = tempfile.mkdtemp(prefix='fmu_')
         try:
             fmpy.extract(str(self.path), unzipdir=self._unzipdir)

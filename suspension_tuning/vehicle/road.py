@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 from scipy import special
 
-from suspension_tuning.paths import config_dir, read_yaml
+from suspension_tuning.paths import config_dir, file_sha256, read_yaml
 from suspension_tuning.vehicle.road_profile import SIDES, RoadProfile, _check_side  # noqa: F401
 
 DEFAULT_CONFIG_PATH = config_dir() / 'road.yaml'
@@ -705,7 +705,7 @@ def road_identity(road: str) -> dict[str, str]:
     """
     if not road:
         return {}
-    from .road_files import FileRoadSpec, file_sha256
+    from .road_files import FileRoadSpec
 
     spec = resolve_road(road)
     out = {'road': str(road)}

@@ -53,7 +53,6 @@ Bad files raise :class:`RoadFileError` (a ValueError) naming the file and the pr
 from __future__ import annotations
 
 import functools
-import hashlib
 import math
 import numbers
 import re
@@ -566,15 +565,6 @@ def fit_to_run(spec: FileRoadSpec, needed_m: float, speed_mps: float | None = No
                   f'times to cover {what} ({needed_m:.1f} m): '
                   f'{repetition_note(length, speed_mps)}', RoadRepetitionWarning, stacklevel=2)
     return replace(spec, length_m=float(needed_m))
-
-
-def file_sha256(path: str | Path) -> str:
-    """SHA-256 (hex) of a road file (what the run configuration records)."""
-    h = hashlib.sha256()
-    with open(path, 'rb') as f:
-        for block in iter(lambda: f.read(1 << 20), b''):
-            h.update(block)
-    return h.hexdigest()
 
 
 # ---------------------------------------------------------------------- writing
