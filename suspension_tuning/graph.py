@@ -32,7 +32,9 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
     Parameters
     ----------
     workers : int
-        Number of simulation workers; 1 keeps the default name ``full_vehicle_sim``.
+        Number of simulation workers; 1 keeps the default name ``full_vehicle_sim``;
+        0 runs none here (the coordinator and the gradient evaluator use the workers
+        they find on the graph, e.g. on other hosts: docs/distributed.md).
     record : bool
         Add the recorder node (one bag per optimisation run).
     context : rclpy.context.Context, optional
@@ -49,7 +51,7 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
     Raises
     ------
     ValueError
-        No worker, or a factory for a node the graph does not have.
+        A negative number of workers, or a factory for a node the graph does not have.
     Exception
         What a node's constructor raised (e.g. FmuConfigError for a worker's FMU), with
         the node's name in its attribute ``node_name``; the nodes made before it are
@@ -60,8 +62,8 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
     from suspension_tuning.nodes.gradient_evaluator import GradientEvaluatorNode
     from suspension_tuning.nodes.valve_controller import ValveControllerNode
 
-    if workers < 1:
-        raise ValueError(f'need at least one simulation worker, got {workers}')
+    if workers < 0:
+        raise ValueError(f'the number of simulation workers cannot be negative: {workers}')
     names = ['full_vehicle_sim'] if workers == 1 else [f'sim_{i}' for i in range(workers)]
     makers = {**{name: functools.partial(FullVehicleSimNode, name) for name in names},
               'gradient_evaluator': GradientEvaluatorNode,
@@ -74,14 +76,11 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
         raise ValueError(f'no node {", ".join(unknown)} in the graph to replace; its nodes: '
                          + ', '.join(makers))
     makers.update(factories or {})
-    workers_set = [Parameter('sim_workers', value=[f'/{name}' for name in names])]
-    graph_set = {'gradient_evaluator': workers_set, 'coordinator': workers_set}
     overrides = overrides or {}
     nodes: list[Node] = []
     for name, make in makers.items():
         try:
-            nodes.append(make(context=context, parameter_overrides=[
-                *graph_set.get(name, []), *overrides.get(name, [])]))
+            nodes.append(make(context=context, parameter_overrides=overrides.get(name, [])))
         except Exception as error:
             error.node_name = name
             for node in reversed(nodes):  # e.g. a worker's FMU child processes
@@ -140,7 +139,9 @@ def main(argv: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning graph``."""
     argv = sys.argv if argv is None else ['graph', *argv]
     parser = argparse.ArgumentParser(prog='graph', description=__doc__.split('\n')[0])
-    parser.add_argument('--workers', type=int, default=1, help='simulation workers')
+    parser.add_argument('--workers', type=int, default=1,
+                        help='simulation workers in this process (0: only those found on the '
+                             'graph, e.g. on other hosts)')
     parser.add_argument('--no-record', action='store_true', help='no recorder node')
     args = parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
     rclpy.init(args=argv)

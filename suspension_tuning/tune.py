@@ -152,11 +152,14 @@ def format_feedback(feedback: Optimise.Feedback) -> str:
 
     Phase 'calibration': the eq. 25 full-model samples done of total (the first run of
     a configuration spends them before its first iteration); phase 'calibration_fit':
-    the R^2 of the eq. 25 fit per function against its threshold; phase 'iteration':
-    the Dynamic-Q iteration just finished.
+    the R^2 of the eq. 25 fit per function against its threshold; phase 'pool': a
+    simulation worker lost, joined, back or refused for another model, and designs sent
+    to another worker; phase 'iteration': the Dynamic-Q iteration just finished.
     """
     if feedback.phase == 'calibration_fit':
         return f'calibration fit: {feedback.note}'
+    if feedback.phase == 'pool':
+        return f'workers: {feedback.note}'
     if feedback.phase == 'calibration':
         c = feedback.calibration
         return (f'calibration (eq. 25): {c.samples_done:3d}/{c.samples_total} full-model '

@@ -37,8 +37,9 @@ def test_calibration_samples_are_split_over_the_workers_with_the_same_scaling(
                                                          n_samples=SAMPLES)))
     assert answer.success, answer.error
     assert answer.n_full_runs == SAMPLES
-    # Two live workers: contiguous chunks of 3 and 3 designs (SimulationPool).
-    assert [w.runs for w in workers] == [SAMPLES // 2, SAMPLES // 2]
+    # Two workers, pieces_per_worker = 3 (config/graph.yaml): 6 pieces of one design
+    # each, handed to whichever worker is free, so both take part.
+    assert sum(w.runs for w in workers) == SAMPLES and min(w.runs for w in workers) >= 1
 
     from suspension_tuning import evaluation
     from suspension_tuning.optim.simplified_gradient import calibrate as calibrate_locally

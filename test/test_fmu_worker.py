@@ -287,7 +287,7 @@ def test_fmu_graph_fails_a_hung_goal_stops_a_cancelled_one_serves_on_and_stops_o
             'fmu_mapping': write_mapping(tmp_path, yaml.safe_load(faulty_mapping(3).text)),
             'fmu_timeout_s': 2}},  # 2 s: a healthy design here takes ~0.05 s
         # 30 as users write it (an int for a float parameter)
-        '/**/coordinator': {'ros__parameters': {'call_timeout_s': 30,
+        '/**/coordinator': {'ros__parameters': {'design_timeout_s': 30,
                                                 'final_telemetry': False}},
         '/**/recorder': {'ros__parameters': {'output_dir': str(tmp_path / 'bags')}}}))
     graph = subprocess.Popen([str(Path(sys.prefix) / 'bin' / 'graph'), '--ros-args',

@@ -78,10 +78,10 @@ def test_ride_optimisation_through_the_one_process_graph_gives_the_in_process_bi
     executor_thread = graph.threads[graph.nodes.index(coordinator)]
     assert len(goal_threads) == 1 and goal_threads[0] != executor_thread.ident
     # Every full run went over the middleware: the calibration batch (its 12 samples in
-    # two chunks of calibration_chunk = 6, config/graph.yaml), one per iteration
+    # three pieces of 4: one worker, pieces_per_worker = 3, config/graph.yaml), one per iteration
     # evaluated, the baseline design's run (its physical metrics in the result) and the
     # telemetry run of the optimum (final_telemetry).
-    assert nodes[0].evaluate_calls == 2 + len(result.history) + 1 + 1
+    assert nodes[0].evaluate_calls == 3 + len(result.history) + 1 + 1
     assert len(result.baseline_metrics) == len(result.metrics) == len(result.metric_names)
     assert [m.feedback.phase for m in feedback].count('iteration') == len(result.history)
     assert result.n_calibration_runs == SAMPLES

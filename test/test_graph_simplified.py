@@ -59,12 +59,12 @@ def test_ride_optimisation_with_simplified_gradients_converges_through_the_graph
     assert result.n_simplified_runs % (2 * n + 1) == 0 and result.n_simplified_runs > 0
     phases = [message.feedback.phase for message in feedback]
     assert phases.count('iteration') == len(result.history)
-    # The calibration's progress comes first, a step per calibration_chunk (6 designs,
-    # config/graph.yaml) of the 12 samples.
+    # The calibration's progress comes first, a step per piece of the batch (one worker:
+    # pieces_per_worker = 3 pieces of 4 designs, config/graph.yaml) of the 12 samples.
     calibration = [(m.feedback.calibration.samples_done, m.feedback.calibration.samples_total)
                    for m in feedback if m.feedback.phase == 'calibration']
-    assert calibration == [(6, SAMPLES), (SAMPLES, SAMPLES)]
-    assert phases[:2] == ['calibration', 'calibration']
+    assert calibration == [(4, SAMPLES), (8, SAMPLES), (SAMPLES, SAMPLES)]
+    assert phases[:3] == ['calibration'] * 3
     # The same loop in-process, with the in-process eq. 25 calibration: same bits.
     local = in_process_optimum(graph['coordinator'].options.as_dict(), SAMPLES)
     np.testing.assert_array_equal(result.x, local.x_best)  # the reported (best) design

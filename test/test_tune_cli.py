@@ -90,8 +90,8 @@ def test_tune_rejects_a_malformed_constraint_before_sending_a_goal():
 
 
 def test_tune_prints_the_calibration_progress_before_the_first_iteration(start_tuning_graph):
-    # A fresh calibration directory (the kit's): the 12 samples are run, in steps of
-    # calibration_chunk = 6 designs (config/graph.yaml).
+    # A fresh calibration directory (the kit's): the 12 samples are run, in pieces of 4
+    # designs (one worker, pieces_per_worker = 3, config/graph.yaml).
     start_tuning_graph(parameters={'coordinator': {'calibration_samples': 12,
                                                    'final_telemetry': False}})
     tune = Path(sys.prefix) / 'bin' / 'tune'
@@ -100,7 +100,8 @@ def test_tune_prints_the_calibration_progress_before_the_first_iteration(start_t
                          capture_output=True, text=True, timeout=300, env=os.environ.copy())
     lines = run.stdout.splitlines()
     calibration = [line for line in lines if line.startswith('calibration (eq. 25):')]
-    assert [line.split()[3] for line in calibration] == ['6/12', '12/12'], run.stdout + run.stderr
+    assert [line.split()[3] for line in calibration] == ['4/12', '8/12', '12/12'], \
+        run.stdout + run.stderr
     first_iteration = next(i for i, line in enumerate(lines) if line.startswith('iteration'))
     assert lines.index(calibration[-1]) < first_iteration
     assert 'calibration full-model runs: 12' in run.stdout

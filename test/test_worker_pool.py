@@ -2,8 +2,9 @@
 
 Two workers run as separate processes (``full_vehicle_sim`` renamed sim_0 and sim_1,
 started like ``ros2 run`` would).  One is killed (SIGKILL) after the first iteration;
-its pending designs time out and are sent to the other worker, and the optimisation
-still returns a result.  With every worker gone the goal fails with a clear message.
+its loss is noticed through DDS liveliness, its pending designs are sent to the other
+worker, and the optimisation still returns a result.  With every worker gone the goal
+fails with a clear message.
 """
 
 import signal
@@ -19,7 +20,7 @@ from suspension_tuning.testing import wait_for_future as wait
 
 pytestmark = pytest.mark.ros
 
-TIMEOUT_S = 8.0  # worker declared dead after this (a 4-design handling batch takes < 1 s)
+TIMEOUT_S = 8.0  # a worker is declared hung after this per design (one takes < 1 s)
 
 
 def start_worker(name, log_dir):
@@ -48,12 +49,12 @@ def test_optimisation_survives_a_killed_worker_and_fails_clearly_without_any(
     try:
         coordinator = CoordinatorNode(context=ros_context, parameter_overrides=[
             Parameter('sim_workers', value=['/sim_0', '/sim_1']),
-            Parameter('call_timeout_s', value=TIMEOUT_S),
+            Parameter('design_timeout_s', value=TIMEOUT_S),
             Parameter('final_telemetry', value=False)])
         client_node = Node('pool_test_client', context=ros_context)
         executor.add(coordinator, client_node)
         deadline = time.monotonic() + 60.0
-        while not all(c.service_is_ready() for c in coordinator.pool.clients.values()):
+        while coordinator.pool.alive != ['/sim_0', '/sim_1']:
             assert time.monotonic() < deadline, 'workers did not come up'
             time.sleep(0.2)
         client = ActionClient(client_node, Optimise, '/coordinator/optimise')
@@ -84,7 +85,7 @@ def test_optimisation_survives_a_killed_worker_and_fails_clearly_without_any(
                           max_iterations=2)))
         failed = wait(handle.get_result_async()).result
         assert not failed.success
-        assert 'no simulation worker left' in failed.message
+        assert 'no simulation worker' in failed.message, failed.message
     finally:
         for process in workers.values():
             if process.poll() is None:

@@ -51,9 +51,9 @@ from suspension_tuning.fmu.mapping import FmuMapping, ScenarioMapping
 from suspension_tuning.fmu.model import FmuConfigError, FmuModel, FmuRunError, design_label
 
 #: Per-design wall-clock timeout by default, s: a detailed multibody FMU (Adams,
-#: CarSim) running a 30 s manoeuvre up to ten times slower than real time, and well
-#: below the coordinator's call_timeout_s (600 s, config/graph.yaml), so that a worker
-#: answers a hung design before the coordinator gives up on the worker.
+#: CarSim) running a 30 s manoeuvre up to ten times slower than real time, and below
+#: the pools' design_timeout_s (360 s, config/graph.yaml), so that a worker answers a
+#: hung design before the coordinator gives up on the worker.
 DEFAULT_TIMEOUT_S = 300.0
 #: Time a new child may take to load the FMU, s: the first child waits for the fork
 #: server's imports (3 s on an idle 2-core machine, 15 s seen with both cores busy).

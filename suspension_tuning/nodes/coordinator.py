@@ -45,14 +45,14 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
-from std_srvs.srv import Trigger
 from suspension_tuning_interfaces.action import Optimise
 from suspension_tuning_interfaces.msg import CalibrationProgress, IterationRecord, TimeHistories
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning.evaluation import scenarios as evaluation_scenarios
 from suspension_tuning.nodes._parameters import declare_numbers
-from suspension_tuning.nodes._services import ServiceCallError, SimulationPool, call
+from suspension_tuning.nodes._pool import PoolEvent, pool_from_parameters
+from suspension_tuning.nodes._services import ServiceCallError, call
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.correction import load_correction_options
 from suspension_tuning.optim.dynamic_q import load_options
@@ -208,7 +208,6 @@ class CoordinatorNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('coordinator', **kwargs)
-        self.declare_parameter('sim_workers', ['/full_vehicle_sim'])
         self.declare_parameter('gradient_node', '/gradient_evaluator')
         declare_numbers(self, {'call_timeout_s': 600.0, 'calibration_samples': 16,
                                'fd_step': 0.025})
@@ -224,12 +223,10 @@ class CoordinatorNode(Node):
         self.timeout_s = float(self.get_parameter('call_timeout_s').value)
         self.stopping = False  # set by destroy_node: a running goal stops waiting
         clients = ReentrantCallbackGroup()
-        self.pool = SimulationPool(self, list(self.get_parameter('sim_workers').value),
-                                   self.timeout_s, clients, self._stopped)
-        # A cancelled goal stops the workers' FMU runs in progress (~/cancel).
-        self.cancel_clients = [self.create_client(Trigger, f'{str(w).rstrip("/")}/cancel',
-                                                  callback_group=clients)
-                               for w in self.get_parameter('sim_workers').value]
+        self._running: Any = None  # the goal handle executing, if any
+        # The workers found on the graph (nodes/_pool.py); a change of membership goes
+        # out as the running goal's feedback.
+        self.pool = pool_from_parameters(self, clients, self._stopped, self._on_pool_event)
         self._cancelling: Any = None  # the goal handle whose cancel was accepted
         gradient_node = str(self.get_parameter('gradient_node').value).rstrip('/')
         self.gradient_client = self.create_client(EvaluateGradient, f'{gradient_node}/gradient',
@@ -258,7 +255,6 @@ class CoordinatorNode(Node):
         # Dumped once (29 ms): the configuration files do not change while the node runs.
         self.static_config_yaml = configuration_yaml()
         self._queue: collections.deque = collections.deque()
-        self._running: Any = None  # the goal handle executing, if any
         self._idle = threading.Condition()
         self.server = ActionServer(
             self, Optimise, '~/optimise', execute_callback=self._execute,
@@ -281,10 +277,14 @@ class CoordinatorNode(Node):
         """Accept; for the running goal, stop the workers' FMU runs in progress too."""
         if goal_handle is self._running:
             self._cancelling = goal_handle
-            for client in self.cancel_clients:
-                if client.service_is_ready():
-                    client.call_async(Trigger.Request())  # answered or not, the goal ends
+            self.pool.cancel_runs()  # the workers' FMU runs in progress; the goal ends anyway
         return CancelResponse.ACCEPT
+
+    def _on_pool_event(self, event: PoolEvent) -> None:
+        """A worker lost, joined, back or refused: the running goal's feedback says so."""
+        running = self._running
+        if running is not None and running.is_active:
+            running.publish_feedback(Optimise.Feedback(phase='pool', note=event.text))
 
     def _cancel_requested(self) -> bool:
         running = self._running
@@ -334,8 +334,9 @@ class CoordinatorNode(Node):
 
     def _worker_models(self) -> dict[str, Any]:
         """Each worker's model description (after :meth:`SimulationPool.check_models`)."""
-        return {str(w).rstrip('/'): self.pool.models.get(w, 'no model description received')
-                for w in self.get_parameter('sim_workers').value}
+        models = self.pool.models
+        return {name: models.get(name, 'no model description received')
+                for name in sorted({*models, *self.pool.allow})}
 
     def _full_model(self, request: TuningRequest, scenario: str | None = None):
         """The full model of ``scenario`` (default the objective's) on the workers."""
@@ -569,7 +570,6 @@ class CoordinatorNode(Node):
         if goal_handle.is_cancel_requested:  # cancelled while it waited for an earlier goal
             goal_handle.canceled()
             return Optimise.Result(success=False, message='cancelled before it started')
-        self.pool.revive()  # a worker that failed an earlier goal and is up again serves
         refusal = None
         try:
             fingerprint = self.pool.check_models()

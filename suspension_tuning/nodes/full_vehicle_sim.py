@@ -37,7 +37,11 @@ start-up: a worker whose FMU or mapping does not fit does not start.  ``~/model`
 GUID or instantiation token and the mapping) with its fingerprint
 (:mod:`suspension_tuning.model_identity`), which every answer carries too and the
 start-up log names in one line; the coordinator records it in the run configuration
-and refuses to mix workers whose fingerprints differ.  An FMU worker publishes no
+and leaves out workers whose fingerprints differ from the pool's.  ``~/model``'s
+writer asserts its liveliness every ``liveliness_lease_s`` (s, DDS automatic
+liveliness): the coordinator and the gradient evaluator find the worker on the graph
+by its ``~/evaluate`` service and hear within their ``worker_loss_timeout_s`` when its
+process or host is gone (:mod:`suspension_tuning.nodes._pool`).  An FMU worker publishes no
 telemetry.
 
 An FMU runs each design in a child process (``fmu_isolation`` 'process', the default;
@@ -59,7 +63,7 @@ import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -72,6 +76,7 @@ from suspension_tuning.fmu.fmi_log import FmuMessage
 from suspension_tuning.fmu.isolated import DEFAULT_TIMEOUT_S, FmuRunCancelledError
 from suspension_tuning.model_identity import builtin_description, summary_line
 from suspension_tuning.nodes._parameters import ParameterError, declare_numbers
+from suspension_tuning.nodes._pool import model_qos
 from suspension_tuning.nodes._services import serve
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.paths import dump_yaml
@@ -86,9 +91,6 @@ RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 #: whole run keeps every sample for the recorder; best-effort subscribers (plot tools)
 #: are compatible with it.
 TELEMETRY = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
-#: The worker's model description: a late subscriber (the coordinator) still gets it.
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class TopicValveController:
@@ -157,7 +159,8 @@ class FullVehicleSimNode(Node):
         self.declare_parameter('integrator', load_vehicle_params().integrator.method)
         try:  # before anything else: a bad FMU set-up leaves nothing half-started
             declare_numbers(self, {'telemetry_decimation': 2, 'closed_loop_timeout_s': 5.0,
-                                   'fmu_timeout_s': DEFAULT_TIMEOUT_S, 'fmu_processes': 1})
+                                   'fmu_timeout_s': DEFAULT_TIMEOUT_S, 'fmu_processes': 1,
+                                   'liveliness_lease_s': 0.5})
             param = self.get_parameter
             self.fmu = worker_model(
                 *(str(param(name).value) for name in ('model', 'fmu_path', 'fmu_mapping')),
@@ -174,7 +177,10 @@ class FullVehicleSimNode(Node):
         self.get_logger().info(summary_line(self.model_description))
         if self.fmu is not None:
             self._check_fmu_plausibility()
-        self.model_pub = self.create_publisher(String, '~/model', LATCHED)
+        # Latched, and alive while the process runs: a pool hears of a worker whose
+        # process or host is gone within its worker_loss_timeout_s (nodes/_pool.py).
+        self.model_pub = self.create_publisher(
+            String, '~/model', model_qos(float(self.get_parameter('liveliness_lease_s').value)))
         # For an FMU, also how its designs run (recorded in every run configuration).
         if self.fmu is not None:
             self.model_description.update(

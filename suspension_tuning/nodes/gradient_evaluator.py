@@ -2,18 +2,18 @@
 
 Service ``~/calibrate`` (Calibrate): the eq. 25 scaling of the simplified model of a
 scenario onto the full model, from N full-model samples (default 30, paper 6.3.1)
-fetched over the graph from the simulation workers (``sim_workers``; a batch is split
-over the live workers as the coordinator splits its own, and a worker that fails has
-its designs sent to another), a chunk of ``calibration_chunk`` designs at a time;
-after each chunk ``~/calibration_progress`` (CalibrationProgress) says how many of
-the samples are done, which the coordinator passes on in its action feedback.  The
+fetched over the graph from the simulation workers (found as the coordinator finds
+its own, :mod:`suspension_tuning.nodes._pool`: every worker takes pieces of the batch
+as it is free, and a lost or hung worker's pieces go to another); after each piece
+``~/calibration_progress`` (CalibrationProgress) says how many of the samples are
+done, which the coordinator passes on in its action feedback.  The
 scaling is cached in ``calibration_dir`` under a key of scenario, n_vars, samples, seed,
 a hash of the simplified models' configuration, the fingerprint of the workers'
 full model (:mod:`suspension_tuning.model_identity`) and, for a request's own ride road
 (``road``), that road and its file's SHA-256, so it costs its N full runs once per model
 and road and is never used for another; the simplified model drives the same road.
-Workers whose fingerprints differ, or differ from the caller's (``model_fingerprint`` of
-the request), are refused.
+Workers whose fingerprints differ from the pool's are left out; a pool whose model
+differs from the caller's (``model_fingerprint`` of the request) is refused.
 
 Service ``~/gradient`` (EvaluateGradient): the gradient of f and the Jacobian of g by
 central differences of the scaled simplified model, all 2n perturbations in one batch
@@ -39,7 +39,8 @@ from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 from suspension_tuning import simplified_inputs
 from suspension_tuning.model_identity import ModelMismatchError
 from suspension_tuning.nodes._parameters import declare_numbers
-from suspension_tuning.nodes._services import ServiceCallError, SimulationPool, serve
+from suspension_tuning.nodes._pool import pool_from_parameters
+from suspension_tuning.nodes._services import ServiceCallError, serve
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.scaling import Scaling, scaling_key
 from suspension_tuning.optim.simplified_gradient import (
@@ -66,21 +67,15 @@ class GradientEvaluatorNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('gradient_evaluator', **kwargs)
-        self.declare_parameter('sim_workers', ['/full_vehicle_sim'])
         self.declare_parameter('calibration_dir', '')
-        # calibration_chunk: designs per progress step of a calibration (each step one
-        # batch to the workers).
-        declare_numbers(self, {'default_samples': 16, 'default_step': 0.025,
-                               'call_timeout_s': 600.0, 'calibration_chunk': 6})
+        declare_numbers(self, {'default_samples': 16, 'default_step': 0.025})
         directory = str(self.get_parameter('calibration_dir').value)
         self.calibration_dir = Path(directory or Path.home() / '.cache' / 'suspension_tuning'
                                     / 'calibration')
         self.scalings: dict[tuple[str, int, str], Scaling] = {}
         self.simplified_runs = 0
         self.stopping = False  # set by destroy_node: a calibration stops waiting
-        self.pool = SimulationPool(self, list(self.get_parameter('sim_workers').value),
-                                   float(self.get_parameter('call_timeout_s').value),
-                                   ReentrantCallbackGroup(), lambda: self.stopping)
+        self.pool = pool_from_parameters(self, ReentrantCallbackGroup(), lambda: self.stopping)
         self.progress_pub = self.create_publisher(CalibrationProgress,
                                                   '~/calibration_progress', 100)
         serve(self, EvaluateGradient, '~/gradient', self._on_gradient,
@@ -112,7 +107,8 @@ class GradientEvaluatorNode(Node):
                 raise ModelMismatchError(
                     f'the caller runs model {request.model_fingerprint}, but the gradient '
                     f'evaluator\'s workers ({", ".join(self.pool.alive)}) run model '
-                    f'{fingerprint}: give both nodes the same sim_workers')
+                    f'{fingerprint}: give both nodes the same sim_workers and '
+                    'sim_worker_pattern')
             response.model_fingerprint = fingerprint
             key = scaling_key(scenario, n_vars, n_samples, seed, fingerprint)
             if request.integrator:  # samples of a named integrator get their own cache
@@ -129,7 +125,6 @@ class GradientEvaluatorNode(Node):
                     self.get_logger().warning(f'stale calibration {path}: {error}')
             if scaling is None:  # the designs are sampled only now (~7 ms)
                 x, _, _ = calibration_designs(n_vars, n_samples, seed)
-                self.pool.revive()  # a failed worker that is up again serves again
                 scaling = self._calibrate_remote(scenario, n_vars, x, key, request.road)
                 response.n_full_runs = n_samples
                 path.parent.mkdir(parents=True, exist_ok=True)
@@ -160,20 +155,19 @@ class GradientEvaluatorNode(Node):
         """Full-model samples from the simulation workers, then the eq. 25 fit."""
         # Only the handling model needs each sample's inputs (simplified_inputs.py).
         start = time.monotonic()
-        chunk = max(1, int(self.get_parameter('calibration_chunk').value))
-        answers = []
-        for part in np.array_split(x, -(-len(x) // chunk)):
-            try:
-                answers += self.pool.evaluate(scenario, n_vars, part,
-                                              return_inputs=scenario == 'handling',
-                                              integrator=key.get('integrator', ''),
-                                              road=road)
-            except ValueError as error:
-                raise ValueError(f'full-model samples failed: {error}') from error
+
+        def progress(done: int) -> None:
             self.progress_pub.publish(CalibrationProgress(
-                scenario=scenario, n_vars=n_vars,
-                samples_done=sum(a.n_designs for a in answers), samples_total=len(x),
+                scenario=scenario, n_vars=n_vars, samples_done=done, samples_total=len(x),
                 wall_time_s=time.monotonic() - start))
+
+        try:
+            answers = self.pool.evaluate(scenario, n_vars, x,
+                                         return_inputs=scenario == 'handling',
+                                         integrator=key.get('integrator', ''), road=road,
+                                         on_piece=progress)
+        except ValueError as error:
+            raise ValueError(f'full-model samples failed: {error}') from error
         full_f = np.concatenate([np.asarray(a.f, dtype=float) for a in answers])
         full_g = np.concatenate([np.asarray(a.g, dtype=float).reshape(a.n_designs,
                                                                       a.n_constraints)
