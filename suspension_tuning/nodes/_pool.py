@@ -379,11 +379,10 @@ class SimulationPool:
         refused = []
         with self._lock:
             self.fingerprint = fingerprint
-            for worker in self.workers.values():
-                was = worker.refused
+            for worker in self.workers.values():  # said again for every goal
                 worker.refused = (self._refusal(worker) if worker.model is not None
                                   and worker.fingerprint != fingerprint else '')
-                if worker.refused and worker.refused != was:
+                if worker.refused and worker.alive:
                     refused.append(worker)
         for worker in refused:
             self._event('refused', worker.refused, worker.name)
