@@ -60,9 +60,11 @@ def test_optimisation_survives_a_killed_worker_and_fails_clearly_without_any(
         client = ActionClient(client_node, Optimise, '/coordinator/optimise')
         assert client.wait_for_server(timeout_sec=10.0)
         killed = threading.Event()
+        killed_at = []
 
         def on_feedback(feedback):
             if not killed.is_set():  # kill sim_0 after the first iteration
+                killed_at.append(time.monotonic())
                 workers['sim_0'].send_signal(signal.SIGKILL)
                 killed.set()
 
@@ -77,6 +79,10 @@ def test_optimisation_survives_a_killed_worker_and_fails_clearly_without_any(
             result.message + '\n' + worker_logs(tmp_path)
         assert result.iterations >= 1 and len(result.x) == 2
         assert coordinator.pool.alive == ['/sim_1'], worker_logs(tmp_path)
+        # Noticed through DDS liveliness within worker_loss_timeout_s (2 s,
+        # config/graph.yaml's default), with 1.5 s for a loaded machine.
+        lost = [e for e in coordinator.pool.events if e.kind == 'lost' and e.worker == '/sim_0']
+        assert lost and lost[0].time_s - killed_at[0] <= 2.0 + 1.5, list(coordinator.pool.events)
         # Now the last worker dies too: the goal fails with a clear error.
         workers['sim_1'].send_signal(signal.SIGKILL)
         workers['sim_1'].wait(timeout=10)
