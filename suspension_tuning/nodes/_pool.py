@@ -215,8 +215,8 @@ class SimulationPool:
                 liveliness=lambda info: self._on_liveliness(name, info),
                 incompatible_qos=lambda _info: self._on_incompatible(name)))
 
-    def _event(self, kind: str, text: str, worker: str) -> None:
-        event = PoolEvent(kind, worker, text)
+    def _event(self, kind: str, text: str, worker: str, time_s: float | None = None) -> None:
+        event = PoolEvent(kind, worker, text, time.monotonic() if time_s is None else time_s)
         self.events.append(event)
         if kind in ('joined', 'back'):  # one call site per severity (rclpy's rule)
             self.node.get_logger().info(text)
@@ -228,6 +228,7 @@ class SimulationPool:
     def _on_model(self, name: str, msg: String) -> None:
         events = []
         with self._news:
+            arrived = time.monotonic()  # taken under the lock: before check_models sees it
             worker = self.workers[name]
             first, worker.model, worker.alive = worker.model is None, description(msg.data), True
             if worker.failed or worker.gone:  # a restarted process describes its model again
@@ -241,7 +242,7 @@ class SimulationPool:
                 events.append(('refused', worker.refused))
             self._news.notify_all()
         for kind, text in events:
-            self._event(kind, text, name)
+            self._event(kind, text, name, arrived)
 
     def _refusal(self, worker: Worker) -> str:
         return (f'worker {worker.name} runs model {worker.fingerprint}, the pool runs model '

@@ -224,6 +224,8 @@ class CoordinatorNode(Node):
         self.stopping = False  # set by destroy_node: a running goal stops waiting
         clients = ReentrantCallbackGroup()
         self._running: Any = None  # the goal handle executing, if any
+        # The goal whose workers were checked last, and when (time.monotonic()).
+        self._pool_checked: tuple[Any, float] = (None, 0.0)
         # The workers found on the graph (nodes/_pool.py); a change of membership goes
         # out as the running goal's feedback.
         self.pool = pool_from_parameters(self, clients, self._stopped, self._on_pool_event)
@@ -281,10 +283,18 @@ class CoordinatorNode(Node):
         return CancelResponse.ACCEPT
 
     def _on_pool_event(self, event: PoolEvent) -> None:
-        """A worker lost, joined, back or refused: the running goal's feedback says so."""
+        """A worker lost, joined, back or refused: the running goal's feedback says so.
+
+        Workers found while the goal starts (:meth:`SimulationPool.check_models`) are
+        the goal's own, recorded in its run configuration: a join is news only after.
+        """
         running = self._running
-        if running is not None and running.is_active:
-            running.publish_feedback(Optimise.Feedback(phase='pool', note=event.text))
+        if running is None or not running.is_active:
+            return
+        checked, at = self._pool_checked
+        if event.kind == 'joined' and (checked is not running or event.time_s <= at):
+            return
+        running.publish_feedback(Optimise.Feedback(phase='pool', note=event.text))
 
     def _cancel_requested(self) -> bool:
         running = self._running
@@ -510,6 +520,7 @@ class CoordinatorNode(Node):
             return Optimise.Result(success=False, message=f'bad goal: {error}')
         try:
             fingerprint = self.pool.check_models()
+            self._pool_checked = (goal_handle, time.monotonic())
             refusal = None
         except (ValueError, ServiceCallError) as error:
             fingerprint, refusal = '', error
@@ -573,6 +584,7 @@ class CoordinatorNode(Node):
         refusal = None
         try:
             fingerprint = self.pool.check_models()
+            self._pool_checked = (goal_handle, time.monotonic())
         except (ValueError, ServiceCallError) as error:
             refusal = error
         # The run configuration records every worker's model, also for a refused goal.
