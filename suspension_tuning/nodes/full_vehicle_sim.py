@@ -329,7 +329,7 @@ class FullVehicleSimNode(Node):
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning full_vehicle_sim``."""
     try:
-        run_node(FullVehicleSimNode, args)
+        run_node(FullVehicleSimNode, args, name='full_vehicle_sim', rename=True)
     except (FmuConfigError, MappingError) as error:  # ParameterError: run_node
         import rclpy
         rclpy.try_shutdown()
