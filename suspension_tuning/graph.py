@@ -99,8 +99,9 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
         try:
             nodes.append(make(context=context, parameter_overrides=[
                 *graph_set.get(name, []), *overrides.get(name, [])]))
-        except Exception as error:
-            error.node_name = name
+        except BaseException as error:  # also Ctrl-C while they are made
+            if isinstance(error, Exception):
+                error.node_name = name
             for node in reversed(nodes):  # e.g. a worker's FMU child processes
                 node.destroy_node()
             raise
@@ -184,6 +185,13 @@ def main(argv: list[str] | None = None) -> None:
         rclpy.try_shutdown()
         print(f'{getattr(error, "node_name", "graph")}: not started: {error}', file=sys.stderr)
         sys.exit(2)
+    except KeyboardInterrupt:  # Ctrl-C while the nodes are made: the ones made are gone
+        rclpy.try_shutdown()
+        return
+    except Exception:
+        if rclpy.ok():
+            raise
+        return  # SIGTERM while the nodes are made: a node on the shut-down context failed
     graph = SpinningGraph(nodes)
     try:
         graph.wait()

@@ -112,6 +112,9 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
         rclpy.try_shutdown()
         print(f'not started: {error}', file=sys.stderr)
         sys.exit(2)
+    except KeyboardInterrupt:  # Ctrl-C while the node is made
+        rclpy.try_shutdown()
+        return
     executor = executor_for(node)
     executor.add_node(node)
     try:
