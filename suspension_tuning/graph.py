@@ -6,6 +6,12 @@ coordinator and (unless ``--no-record``) the recorder, each node on an executor
 of its own.
 ROS parameters come from ``--ros-args --params-file config/graph.yaml`` like for any
 node.  Each node also runs alone with ``ros2 run suspension_tuning <node>``.
+
+A graph whose node names another node already has on the ROS domain (e.g. a second
+``graph`` left running) does not start: one line names those nodes, the domain and
+how to pick another (another ``ROS_DOMAIN_ID``, or a namespace ``--ros-args -r
+__ns:=/other``), exit code 2 (:mod:`suspension_tuning.nodes._unique`; the check waits
+up to 3.5 s for discovery).
 """
 
 from __future__ import annotations
@@ -22,6 +28,17 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from suspension_tuning.nodes._spin import executor_for, spin_until_shutdown
+
+
+def worker_names(workers: int) -> list[str]:
+    """The simulation workers' node names: ``full_vehicle_sim`` alone, else ``sim_<i>``."""
+    return ['full_vehicle_sim'] if workers == 1 else [f'sim_{i}' for i in range(workers)]
+
+
+def node_names(workers: int = 1, record: bool = True) -> list[str]:
+    """The names of the nodes :func:`build_nodes` creates (before remapping)."""
+    return [*worker_names(workers), 'gradient_evaluator', 'valve_controller', 'coordinator',
+            *(['recorder'] if record else [])]
 
 
 def build_nodes(workers: int = 1, record: bool = True, context=None,
@@ -64,7 +81,7 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
 
     if workers < 0:
         raise ValueError(f'the number of simulation workers cannot be negative: {workers}')
-    names = ['full_vehicle_sim'] if workers == 1 else [f'sim_{i}' for i in range(workers)]
+    names = worker_names(workers)
     makers = {**{name: functools.partial(FullVehicleSimNode, name) for name in names},
               'gradient_evaluator': GradientEvaluatorNode,
               'valve_controller': ValveControllerNode, 'coordinator': CoordinatorNode}
@@ -81,8 +98,9 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
     for name, make in makers.items():
         try:
             nodes.append(make(context=context, parameter_overrides=overrides.get(name, [])))
-        except Exception as error:
-            error.node_name = name
+        except BaseException as error:  # also Ctrl-C while they are made
+            if isinstance(error, Exception):
+                error.node_name = name
             for node in reversed(nodes):  # e.g. a worker's FMU child processes
                 node.destroy_node()
             raise
@@ -144,9 +162,23 @@ def main(argv: list[str] | None = None) -> None:
                              'graph, e.g. on other hosts)')
     parser.add_argument('--no-record', action='store_true', help='no recorder node')
     args = parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
+    if args.workers < 0:
+        parser.error(f'--workers cannot be negative, got {args.workers}')
     rclpy.init(args=argv)
+    from suspension_tuning.nodes._unique import require_unique, start_check
+    # One discovery window for every node of the graph, spent importing the nodes.
+    check = start_check('graph', node_names(args.workers, not args.no_record))
     from suspension_tuning.fmu import FmuConfigError, MappingError
+    from suspension_tuning.nodes import (  # noqa: F401 - imported during the window
+        coordinator,
+        full_vehicle_sim,
+        gradient_evaluator,
+        recorder,
+        valve_controller,
+    )
     from suspension_tuning.nodes._parameters import ParameterError
+    if not require_unique('graph', check):
+        return  # Ctrl-C or SIGTERM during the check: nothing was started
     try:
         nodes = build_nodes(args.workers, not args.no_record)
     except (FmuConfigError, MappingError, ParameterError) as error:
@@ -154,6 +186,13 @@ def main(argv: list[str] | None = None) -> None:
         rclpy.try_shutdown()
         print(f'{getattr(error, "node_name", "graph")}: not started: {error}', file=sys.stderr)
         sys.exit(2)
+    except KeyboardInterrupt:  # Ctrl-C while the nodes are made: the ones made are gone
+        rclpy.try_shutdown()
+        return
+    except Exception:
+        if rclpy.ok():
+            raise
+        return  # SIGTERM while the nodes are made: a node on the shut-down context failed
     graph = SpinningGraph(nodes)
     try:
         graph.wait()

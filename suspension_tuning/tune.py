@@ -34,6 +34,14 @@ when no iterate was feasible, "no feasible design found" and the least violating
 then the baseline design and the physical metrics of both (seat W_b RMS in m/s^2,
 first roll peak in deg, roll-rate RMS in deg/s, lift-off time per tyre in %).  Ctrl-C
 cancels the goal and exits with status 130.
+
+The goal goes to one action server only: with more than one server of the action on
+the ROS domain (e.g. a second ``graph`` left running) each would run it, so ``tune``
+says so and exits with status 2 before sending it (it waits up to the nodes' discovery
+window, 3.5 s from its start, to see them, :mod:`suspension_tuning.nodes._unique`).  A
+second server seen only once the goal is accepted, or accepting it too (rclpy's "Two
+goals were accepted with the same ID"), is reported the same way, and the goal is
+cancelled.
 """
 
 from __future__ import annotations
@@ -42,6 +50,7 @@ import argparse
 import json
 import sys
 import threading
+import time
 from pathlib import Path
 
 import rclpy
@@ -53,6 +62,7 @@ from suspension_tuning_interfaces.action import Optimise
 from suspension_tuning_interfaces.msg import Constraint
 
 from suspension_tuning.nodes._spin import wait_future
+from suspension_tuning.nodes._unique import POLL_S, discovery_window_s
 from suspension_tuning.physical_metrics import metric_lines
 from suspension_tuning.reported_design import statement
 from suspension_tuning.tuning import ConstraintSpec
@@ -223,18 +233,84 @@ def format_result(result) -> str:
     return '\n'.join(lines)
 
 
-def wait_result(client: ActionClient, handle, poll_s: float = 1.0) -> Optimise.Result | None:
+#: What rclpy's ActionClient raises (in the executor) when two servers accept one goal.
+DUPLICATE_ACCEPT = 'Two goals were accepted with the same ID'
+
+
+class DuplicateServerError(Exception):
+    """More than one action server of the goal's action answered it."""
+
+
+def count_servers(node: Node, action: str) -> int:
+    """Action servers of ``action`` on the domain (the servers of its goal service)."""
+    return node.count_services(action.rstrip('/') + '/_action/send_goal')
+
+
+def servers_seen(node: Node, action: str, started: float, window_s: float) -> int:
+    """Servers of ``action`` seen once the discovery window has passed (or two are seen).
+
+    Parameters
+    ----------
+    started : float
+        ``time.monotonic()`` when the node was created, s.
+    window_s : float
+        Discovery window from ``started``, s: a server announces itself only every few
+        seconds (:data:`suspension_tuning.nodes._unique.DISCOVERY_WINDOW_S`).
+    """
+    while True:
+        count = count_servers(node, action)
+        if count > 1 or time.monotonic() - started >= window_s:
+            return count
+        time.sleep(POLL_S)
+
+
+def not_unique(action: str, domain_id: int, count: int | None = None) -> str:
+    """The error line for an action that more than one server serves."""
+    many = f'{count} action servers' if count else 'more than one action server'
+    return (f'error: {many} {action} on ROS domain {domain_id} (ROS_DOMAIN_ID), each '
+            'would run the goal (another graph or coordinator left running?): stop the '
+            'other one, or run the graphs on different ROS_DOMAIN_IDs or namespaces '
+            '(--ros-args -r __ns:=/other; tune --action /other/coordinator/optimise)')
+
+
+def spin(executor: MultiThreadedExecutor, duplicate: threading.Event) -> None:
+    """Spin ``executor``; rclpy's error for a goal accepted twice sets ``duplicate``.
+
+    The error comes from the executor when a second server's acceptance of the goal
+    arrives; spinning goes on (the goal's cancel request still needs it).
+    """
+    while executor.context.ok():
+        try:
+            executor.spin()
+            return
+        except RuntimeError as error:
+            if DUPLICATE_ACCEPT not in str(error):
+                raise
+            duplicate.set()
+
+
+def wait_result(client: ActionClient, handle, poll_s: float = 1.0,
+                duplicate: threading.Event | None = None) -> Optimise.Result | None:
     """The goal's result; None if the action server goes away first.
 
     DDS says at once when a server shuts down; a killed one drops out of the graph
     when its lease runs out (Fast DDS: 20 s by default).
+
+    Raises
+    ------
+    DuplicateServerError
+        ``duplicate`` was set: a second server accepted the goal too.
     """
     future = handle.get_result_async()
     done = threading.Event()
     future.add_done_callback(lambda _: done.set())
     while not done.wait(poll_s):
+        if duplicate is not None and duplicate.is_set():
+            raise DuplicateServerError
         if not client.server_is_ready():
             return None
+    if duplicate is not None and duplicate.is_set():
+        raise DuplicateServerError
     return future.result().result
 
 
@@ -268,18 +344,30 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     # Without rclpy's signal handler: it would shut the context down on Ctrl-C, and the
     # cancel request could no longer be sent.  Ctrl-C raises KeyboardInterrupt here.
+    try:
+        window_s = discovery_window_s()
+    except ValueError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
     rclpy.init(args=['tune', *args_list], signal_handler_options=SignalHandlerOptions.NO)
     node = Node('tune')
+    started = time.monotonic()
+    domain_id = node.context.get_domain_id()
     client = ActionClient(node, Optimise, args.action)
     executor = MultiThreadedExecutor()
     executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
+    duplicate = threading.Event()
+    spinner = threading.Thread(target=spin, args=(executor, duplicate), daemon=True)
     spinner.start()
     sending, handle = None, None
     try:
         if not client.wait_for_server(timeout_sec=args.server_timeout):
             print(f'error: no action server {args.action} within {args.server_timeout} s',
                   file=sys.stderr)
+            return 2
+        count = servers_seen(node, args.action, started, window_s) if window_s > 0 else 1
+        if count > 1:
+            print(not_unique(args.action, domain_id, count), file=sys.stderr)
             return 2
         goal = Optimise.Goal(scenario=args.scenario, n_vars=args.n_vars, x0=x0,
                              gradient_source='evaluate' if args.evaluate else args.gradient,
@@ -300,13 +388,25 @@ def main(argv: list[str] | None = None) -> int:
         if handle is None or not handle.accepted:
             print('error: goal rejected', file=sys.stderr)
             return 2
-        result = wait_result(client, handle)
+        if duplicate.is_set() or count_servers(node, args.action) > 1:
+            raise DuplicateServerError  # (rclpy logs a second acceptance, or raises)
+        result = wait_result(client, handle, duplicate=duplicate)
         if result is None:
             print(f'error: the action server {args.action} went away before the result',
                   file=sys.stderr)
             return 1
         print(format_result(result), flush=True)
         return 0 if result.success else 1
+    except DuplicateServerError:
+        count = count_servers(node, args.action)
+        print(not_unique(args.action, domain_id, count if count > 1 else None),
+              file=sys.stderr)
+        try:  # every server that accepted the goal gets the cancel request
+            wait_future(handle.cancel_goal_async(), 10.0)
+            print('the goal was cancelled', file=sys.stderr)
+        except (TimeoutError, KeyboardInterrupt):
+            print('error: the cancel request was not answered', file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         if handle is None and sending is not None:  # the goal may be accepted still
             try:

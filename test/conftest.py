@@ -32,6 +32,10 @@ def _clean_stale_shared_memory() -> None:
 
 
 os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
+# The node executables' start-up check for a node of their name on the domain waits up
+# to 3.5 s for discovery (nodes/_unique.py); the tests start dozens of them on a domain
+# of their own, so 0.5 s here.  The tests of the check itself set a longer window.
+os.environ.setdefault('SUSPENSION_TUNING_DISCOVERY_WINDOW_S', '0.5')
 _clean_stale_shared_memory()
 # The Ctrl-C tests send SIGINT to the executables they start.  A shell runs a
 # background job with SIGINT ignored, and an ignored signal stays ignored across

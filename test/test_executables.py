@@ -62,7 +62,9 @@ def test_node_starts_via_ament_lookup_and_stops_on_sigint(name, ros_context, exe
     try:
         deadline = time.monotonic() + 30.0
         while time.monotonic() < deadline:
-            if f'{name}_under_test' in observer.get_node_names():
+            # The node serves its parameters: the start-up check's probe of its name
+            # (nodes/_unique.py) is on the graph before it, without services.
+            if observer.count_services(f'/{name}_under_test/get_parameters'):
                 break
             assert process.poll() is None, process.stdout.read()
             time.sleep(0.2)

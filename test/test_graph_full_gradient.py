@@ -56,6 +56,38 @@ def test_sim_service_matches_in_process_and_survives_bad_requests(ros_context, e
     assert again.success and again.f[0] == response.f[0]  # still serving, same bits
 
 
+def test_a_request_of_more_designs_than_the_worker_takes_is_refused_at_once(
+        ros_context, executor):
+    """5,000 designs (minutes of work) are refused without a run, naming the limit and
+    its parameter; a lower limit set at run time applies to the next request."""
+    import time
+
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from suspension_tuning_interfaces.srv import EvaluateDesign
+
+    from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
+
+    sim = FullVehicleSimNode('limited_sim', context=ros_context)
+    client_node = Node('limited_sim_client', context=ros_context)
+    executor.add(sim, client_node)
+    client = client_node.create_client(EvaluateDesign, '/limited_sim/evaluate')
+    start = time.monotonic()
+    answer = call(client, EvaluateDesign.Request(scenario='ride', n_vars=2,
+                                                 designs=[0.5] * 2 * 5000))
+    assert time.monotonic() - start < 10.0  # refused, not run (5,000 runs: ~4 min)
+    assert not answer.success
+    assert ('5000 designs in one request, more than this worker takes (parameter '
+            'max_designs_per_request = 128)') in answer.error, answer.error
+    assert sim.runs == 0
+    [result] = sim.set_parameters([Parameter('max_designs_per_request', value=2)])
+    assert result.successful, result.reason
+    three = call(client, EvaluateDesign.Request(scenario='ride', n_vars=2, designs=[0.5] * 6))
+    assert not three.success and 'max_designs_per_request = 2' in three.error
+    two = call(client, EvaluateDesign.Request(scenario='ride', n_vars=2, designs=[0.5] * 4))
+    assert two.success and len(two.f) == 2 and sim.runs == 2, two.error
+
+
 def test_coordinator_action_with_full_gradients_equals_in_process(ros_context, executor):
     from rclpy.action import ActionClient
     from rclpy.node import Node

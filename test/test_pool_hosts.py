@@ -79,6 +79,9 @@ class Hosts:
             'AMENT_PREFIX_PATH': os.environ.get('AMENT_PREFIX_PATH', sys.prefix),
             'ROS_LOG_DIR': str(tmp / 'roslog'), 'PYTHONUNBUFFERED': '1',
             'NUMBA_CACHE_DIR': os.environ.get('NUMBA_CACHE_DIR', ''),
+            # The suite's start-up discovery window (test/conftest.py).
+            'SUSPENSION_TUNING_DISCOVERY_WINDOW_S': os.environ.get(
+                'SUSPENSION_TUNING_DISCOVERY_WINDOW_S', ''),
         }
         self.env = {k: v for k, v in self.env.items() if v}
 

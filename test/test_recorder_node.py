@@ -322,15 +322,18 @@ def publish_and_wait_recorded(ros_context, executor, process, tmp_path, n):
     return mcap
 
 
-def test_ctrl_c_finalises_the_bag(ros_context, executor, tmp_path):
+@pytest.mark.parametrize('stop', [signal.SIGINT, signal.SIGTERM], ids=['ctrl_c', 'sigterm'])
+def test_ctrl_c_or_sigterm_finalises_the_bag(ros_context, executor, tmp_path, stop):
     from suspension_tuning.bag.reader import read_messages
 
     process = start_recorder_process(tmp_path)
     try:
         publish_and_wait_recorded(ros_context, executor, process, tmp_path, 30)
     finally:
-        process.send_signal(signal.SIGINT)
+        start = time.monotonic()
+        process.send_signal(stop)
         output, _ = process.communicate(timeout=20)
+    assert time.monotonic() - start < 5.0, output  # stopped like Ctrl-C, at once
     assert process.returncode == 0, output
     assert (tmp_path / 'run' / 'metadata.yaml').is_file()
     contents = read_messages(tmp_path / 'run')

@@ -324,3 +324,109 @@ def test_a_server_that_never_answers_the_goal_is_an_error_not_a_hang(ros_context
     assert run.returncode == 1, run.stderr
     assert 'the goal was not answered within 8.0 s' in run.stderr
     assert 'Traceback' not in run.stderr
+
+
+def _two_servers(ros_context, executor, action: str):
+    """Two Optimise servers of ``action`` (two nodes), spun by ``executor``: each goal
+    is held until it is cancelled (60 s at most), and its end listed ('cancelled' or
+    'aborted')."""
+    import time
+
+    from rclpy.action import ActionServer, CancelResponse
+    from rclpy.callback_groups import ReentrantCallbackGroup
+    from rclpy.node import Node
+    from suspension_tuning_interfaces.action import Optimise
+
+    ended = []
+
+    def execute(goal_handle):
+        deadline = time.monotonic() + 60.0
+        while not goal_handle.is_cancel_requested and time.monotonic() < deadline:
+            time.sleep(0.02)
+        if goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+            ended.append('cancelled')
+        else:
+            goal_handle.abort()
+            ended.append('aborted')
+        return Optimise.Result(message='held')
+
+    servers = []
+    for k in range(2):
+        node = Node(f'twin_coordinator_{k}', context=ros_context)
+        servers.append(ActionServer(node, Optimise, action, execute,
+                                    cancel_callback=lambda _: CancelResponse.ACCEPT,
+                                    callback_group=ReentrantCallbackGroup()))
+        executor.add(node)
+    return servers, ended
+
+
+def test_tune_refuses_an_action_two_servers_serve_before_sending_the_goal(
+        ros_context, executor, ros_domain_id):
+    servers, ended = _two_servers(ros_context, executor, '/twice/optimise')
+    try:
+        run = subprocess.run([str(Path(sys.prefix) / 'bin' / 'tune'), '--action',
+                              '/twice/optimise'], capture_output=True, text=True, timeout=120)
+    finally:
+        for server in servers:
+            server.destroy()
+    assert run.returncode == 2, run.stderr
+    assert (f'error: 2 action servers /twice/optimise on ROS domain {ros_domain_id} '
+            '(ROS_DOMAIN_ID)') in run.stderr, run.stderr
+    assert 'Traceback' not in run.stderr and not ended
+
+
+def test_a_goal_two_servers_accept_is_reported_and_cancelled_not_a_crash(
+        ros_context, executor, ros_domain_id):
+    """Without the check before sending (a server discovered too late for it), both
+    servers accept the goal; rclpy's 'Two goals were accepted with the same ID' becomes
+    the same message, and the cancel request reaches both."""
+    import time
+
+    servers, ended = _two_servers(ros_context, executor, '/twice_late/optimise')
+    try:
+        run = subprocess.run([str(Path(sys.prefix) / 'bin' / 'tune'), '--action',
+                              '/twice_late/optimise'], capture_output=True, text=True,
+                             timeout=120,
+                             env={**os.environ, 'SUSPENSION_TUNING_DISCOVERY_WINDOW_S': '0'})
+        deadline = time.monotonic() + 10.0  # a cancelled goal ends within 0.02 s
+        while len(ended) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+    finally:
+        for server in servers:
+            server.destroy()
+    assert run.returncode == 2, run.stdout + run.stderr
+    # rclpy either raises for the second acceptance or logs it: the count says 2 either way
+    assert (f'error: 2 action servers /twice_late/optimise on ROS domain {ros_domain_id}'
+            in run.stderr), run.stderr
+    assert 'the goal was cancelled' in run.stderr
+    assert 'Traceback' not in run.stderr, run.stderr
+    assert ended == ['cancelled', 'cancelled']  # both servers ran it, both cancelled it
+
+
+def test_rclpys_error_for_a_goal_accepted_twice_is_caught_and_spinning_goes_on():
+    """rclpy raises 'Two goals were accepted with the same ID' from the executor when
+    two acceptances of one goal are taken before its request is forgotten."""
+    import threading
+
+    from suspension_tuning.tune import spin
+
+    class Executor:  # raises as rclpy's does once, then returns as after shutdown
+        def __init__(self, error):
+            self.context, self.error, self.spins = self, error, 0
+
+        def ok(self):
+            return True
+
+        def spin(self):
+            self.spins += 1
+            if self.spins == 1:
+                raise self.error
+
+    duplicate = threading.Event()
+    executor = Executor(RuntimeError('Two goals were accepted with the same ID (<handle>)'))
+    spin(executor, duplicate)
+    assert duplicate.is_set() and executor.spins == 2
+    other = Executor(RuntimeError('failed to initialize wait set'))
+    with pytest.raises(RuntimeError, match='wait set'):
+        spin(other, threading.Event())

@@ -78,7 +78,8 @@ def wait_future(future: Any, timeout_s: float | None = None) -> Any:
     return future.result()
 
 
-def run_node(make_node: Callable[[], Node], args: list[str] | None = None) -> None:
+def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
+             name: str | None = None, rename: bool = False) -> None:
     """Initialise rclpy, spin one node until Ctrl-C or shutdown, then clean up.
 
     Parameters
@@ -88,19 +89,32 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None) -> No
         is spun by :func:`executor_for` the node.
     args : list of str, optional
         Command-line arguments (``--ros-args ...``); default ``sys.argv``.
+    name : str, optional
+        The node's name as ``make_node`` creates it (before remapping).  With it, the
+        node is not created when another node of its fully-qualified name runs on the
+        domain (:mod:`suspension_tuning.nodes._unique`, a discovery wait of up to 3.5 s);
+        the process says so in one line and exits with code 2.
+    rename : bool
+        The refusal also suggests another node name (a simulation worker).
 
     A parameter value the node cannot use (:class:`~suspension_tuning.nodes._parameters.
     ParameterError`) ends the process with its one-line message and exit code 2.
     """
     from suspension_tuning.nodes._parameters import ParameterError
+    from suspension_tuning.nodes._unique import require_unique, start_check
 
     rclpy.init(args=args)
+    if name is not None and not require_unique(name, start_check(name, [name]), rename):
+        return  # Ctrl-C or SIGTERM during the check
     try:
         node = make_node()
     except ParameterError as error:
         rclpy.try_shutdown()
         print(f'not started: {error}', file=sys.stderr)
         sys.exit(2)
+    except KeyboardInterrupt:  # Ctrl-C while the node is made
+        rclpy.try_shutdown()
+        return
     executor = executor_for(node)
     executor.add_node(node)
     try:

@@ -685,7 +685,7 @@ class CoordinatorNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning coordinator``."""
-    run_node(CoordinatorNode, args)
+    run_node(CoordinatorNode, args, name='coordinator')
 
 
 if __name__ == '__main__':

@@ -3,9 +3,10 @@
 Service ``~/evaluate`` (EvaluateDesign): a scenario and one or many designs in; the
 objective f (eq. 9 or 10), the tyre-hop constraints g (eq. 11), named metrics, the
 simplified models' inputs of each design and the wall time out.  A bad request
-(unknown scenario, wrong length, NaN, out of bounds) gets ``success = false`` and the
-reason in ``error``; the node keeps serving.  A request's ``road`` drives the ride and
-mixed scenarios on another road than config/scenarios.yaml's (a road of
+(unknown scenario, wrong length, NaN, out of bounds, more designs than parameter
+``max_designs_per_request``, default 128) gets ``success = false`` and the reason in
+``error``, at once and without a run; the node keeps serving.  A request's ``road``
+drives the ride and mixed scenarios on another road than config/scenarios.yaml's (a road of
 config/road.yaml, a road file or an entry, :func:`suspension_tuning.vehicle.road.
 resolve_road`); a bad or too short road file is such a bad request.
 
@@ -91,6 +92,12 @@ RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 #: whole run keeps every sample for the recorder; best-effort subscribers (plot tools)
 #: are compatible with it.
 TELEMETRY = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
+#: Designs one ~/evaluate request may hold (parameter ``max_designs_per_request``): above
+#: every batch the graph sends (pieces of a batch: at most the eq. 25 calibration's 16
+#: samples, paper 30; full-model gradients: 2n + 1 <= 9), far below a request that
+#: would hold a worker for minutes after its caller gave up (a ride design takes ~0.05 s
+#: here: 5,000 take 4 minutes).
+MAX_DESIGNS_PER_REQUEST = 128
 
 
 class TopicValveController:
@@ -160,7 +167,8 @@ class FullVehicleSimNode(Node):
         try:  # before anything else: a bad FMU set-up leaves nothing half-started
             declare_numbers(self, {'telemetry_decimation': 2, 'closed_loop_timeout_s': 5.0,
                                    'fmu_timeout_s': DEFAULT_TIMEOUT_S, 'fmu_processes': 1,
-                                   'liveliness_lease_s': 0.5})
+                                   'liveliness_lease_s': 0.5,
+                                   'max_designs_per_request': MAX_DESIGNS_PER_REQUEST})
             param = self.get_parameter
             self.fmu = worker_model(
                 *(str(param(name).value) for name in ('model', 'fmu_path', 'fmu_mapping')),
@@ -238,6 +246,11 @@ class FullVehicleSimNode(Node):
         try:
             designs = evaluation.parse_designs(request.scenario, int(request.n_vars),
                                                request.designs)
+            limit = int(self.get_parameter('max_designs_per_request').value)
+            if len(designs) > limit:
+                raise ValueError(f'{len(designs)} designs in one request, more than this '
+                                 f'worker takes (parameter max_designs_per_request = {limit}): '
+                                 'send them in smaller requests, or raise the parameter')
             if self.fmu is None:
                 result = evaluation.evaluate(
                     request.scenario, designs, controllers=self._controllers(request, designs),
@@ -335,7 +348,7 @@ class FullVehicleSimNode(Node):
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning full_vehicle_sim``."""
     try:
-        run_node(FullVehicleSimNode, args)
+        run_node(FullVehicleSimNode, args, name='full_vehicle_sim', rename=True)
     except (FmuConfigError, MappingError) as error:  # ParameterError: run_node
         import rclpy
         rclpy.try_shutdown()

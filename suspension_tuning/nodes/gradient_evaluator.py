@@ -224,7 +224,7 @@ class GradientEvaluatorNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning gradient_evaluator``."""
-    run_node(GradientEvaluatorNode, args)
+    run_node(GradientEvaluatorNode, args, name='gradient_evaluator')
 
 
 if __name__ == '__main__':

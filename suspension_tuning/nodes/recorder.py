@@ -233,7 +233,7 @@ def main(args: list[str] | None = None) -> None:
     # Single-threaded: no callback blocks, and rclpy's MultiThreadedExecutor costs more
     # per message (benchmarks/bench_recorder.py, this 2-core machine: 3900-6100 against
     # 1900-2400 messages/s).
-    run_node(RecorderNode, args)
+    run_node(RecorderNode, args, name='recorder')
 
 
 if __name__ == '__main__':

@@ -76,7 +76,7 @@ class ValveControllerNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning valve_controller``."""
-    run_node(ValveControllerNode, args)
+    run_node(ValveControllerNode, args, name='valve_controller')
 
 
 if __name__ == '__main__':
