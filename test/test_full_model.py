@@ -179,6 +179,32 @@ def test_same_bits_in_chunks_alone_or_in_a_batch():
     np.testing.assert_array_equal(alone.state[0], whole[1])
 
 
+@pytest.mark.parametrize('integrator', ['fixed_step', 'variable_step'])
+def test_same_bits_on_one_thread_as_on_two(integrator):
+    # Short kernel calls run on one thread (full_model.SERIAL_BELOW_DESIGN_STEPS), long
+    # ones in parallel over the designs: a run's bits must not depend on it.  Three
+    # designs, one kernel call of 2 s (in-kernel controllers): parallel unless forced.
+    import numba
+
+    from suspension_tuning.evaluation import evaluate
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip('numba has one thread here (NUMBA_NUM_THREADS)')
+    x = np.array([[0.3, 0.7], [0.5005, 0.5005], [0.9, 0.1]])
+    threads = numba.get_num_threads()
+    numba.set_num_threads(2)
+    try:
+        two = evaluate('handling', x, integrator=integrator)
+        numba.set_num_threads(1)
+        one = evaluate('handling', x, integrator=integrator)
+    finally:
+        numba.set_num_threads(threads)
+    np.testing.assert_array_equal(one.f, two.f)
+    np.testing.assert_array_equal(one.g, two.g)
+    for name, history in two.result.histories.items():
+        np.testing.assert_array_equal(one.result.histories[name], history, err_msg=name)
+
+
 def test_kernel_driver_matches_python_preview_driver():
     model, setting, driver, sc, speed = _handling_model(1)
     n = int(round(9.0 / P.dt_s))  # the whole double lane change (9 s at 65 km/h)

@@ -5,6 +5,8 @@ bag) is exercised by test_resume.py and by the example project under examples/.
 """
 
 import os
+import subprocess
+import sys
 import threading
 
 import pytest
@@ -16,6 +18,7 @@ from suspension_tuning.testing import (
     call_service,
     isolated_context,
     open_bag,
+    reserved_domain,
     send_goal,
     spinning_executor,
     wait_for_bag,
@@ -24,6 +27,71 @@ from suspension_tuning.testing import (
 )
 
 pytestmark = pytest.mark.ros
+
+
+def test_the_session_domain_is_reserved_on_the_machine_and_shared_in_the_process(
+        ros_domain_id):
+    import domain_coordinator
+
+    # A second reservation, launch_testing's own, starting at the session's domain:
+    # the session holds that one, so it gets the next free one.
+    after = iter([ros_domain_id, *range(10, 100)])  # the kit's range, 10..99
+    with domain_coordinator.domain_id(selector=lambda: next(after)) as other:
+        assert other != ros_domain_id
+    # The kit's blocks without a domain id take the session's domain.
+    with reserved_domain() as domain, isolated_context() as context:
+        assert domain == ros_domain_id == context.get_domain_id()
+    with reserved_domain(ros_domain_id) as domain:  # asked for by number: shared too
+        assert domain == ros_domain_id
+
+
+def test_another_process_never_gets_the_session_domain(ros_domain_id):
+    # A process whose search starts at the session's domain (as a pid would make it)
+    # moves on to a free one; asking for the session's domain by number is refused.
+    code = ('from suspension_tuning.testing import _environment as env\n'
+            f'env.default_domain_id = lambda: {ros_domain_id}\n'
+            'with env.reserved_domain() as domain:\n'
+            '    print(domain)\n'
+            'try:\n'
+            f'    with env.reserved_domain({ros_domain_id}):\n'
+            '        pass\n'
+            'except env.DomainInUseError as error:\n'
+            '    print(error)\n')
+    child = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                           timeout=120, check=True)
+    domain, refusal = child.stdout.splitlines()
+    assert int(domain) != ros_domain_id and 10 <= int(domain) <= 99
+    assert refusal.startswith(f'ROS domain {ros_domain_id} is reserved by another process '
+                              f'on this machine (TCP port {32768 + ros_domain_id} is bound')
+
+
+def test_a_session_asking_for_a_held_domain_stops_and_says_how_to_choose(
+        tmp_path, ros_domain_id):
+    # Two sessions in one folder of their own (the package's plugin, no conftest.py):
+    # one asks for this session's domain, the other takes a free one and frees it.
+    (tmp_path / 'pytest.ini').write_text('[pytest]\n')
+    (tmp_path / 'test_domain.py').write_text(
+        'def test_domain(ros_domain_id):\n'
+        '    open("domain.txt", "w").write(str(ros_domain_id))\n')
+
+    def session(*options):
+        return subprocess.run([sys.executable, '-m', 'pytest', '-q', '-p', 'no:cacheprovider',
+                               *options], cwd=tmp_path, capture_output=True, text=True,
+                              timeout=120)
+
+    held = session('--ros-domain-id', str(ros_domain_id))
+    assert held.returncode == pytest.ExitCode.USAGE_ERROR, held.stdout + held.stderr
+    assert (f'ERROR: --ros-domain-id {ros_domain_id}: ROS domain {ros_domain_id} is '
+            'reserved by another process on this machine') in held.stderr
+    assert ('Choose another with --ros-domain-id N, or leave the option out: the session '
+            'then takes a free domain.') in held.stderr
+    assert not (tmp_path / 'domain.txt').exists()  # no test ran
+    free = session()
+    assert free.returncode == 0, free.stdout + free.stderr
+    theirs = int((tmp_path / 'domain.txt').read_text())
+    assert theirs != ros_domain_id
+    with reserved_domain(theirs):  # freed when that session ended
+        pass
 
 
 def test_a_context_is_on_loopback_on_its_domain_and_the_environment_comes_back(

@@ -103,20 +103,40 @@ def test_variable_step_design_gives_the_same_bits_alone_and_in_a_batch():
 def test_variable_step_bits_are_the_same_compiled_afresh_and_from_numba_cache(tmp_path):
     # The noise amplifies last-bit differences: with fastmath kernels a fresh compile
     # and a cache load gave f differing by 1 % (0.2022 against 0.2002 at the centre).
-    # A child process compiles the variable-step path into an empty cache (~25 s).
+    # One side compiles the variable-step kernel afresh, the other loads it from numba's
+    # cache.  This process did one of them: a fresh checkout compiles the kernel in the
+    # session (and caches it), a warm one loads it.  A child process does the other,
+    # loading from the cache (~3 s) or compiling into an empty one (~25 s), and says
+    # which it did.
     import os
     import subprocess
     import sys
 
+    from suspension_tuning.vehicle import _variable_step as VS  # noqa: N812
+
     x = [[0.3, 0.7]]
+    here = evaluate('handling', np.array(x), integrator='variable_step').f[0]
+    kernel = VS.integrate_variable
+    compiled_here = all(kernel.stats.cache_misses[s] for s in kernel.signatures)
     code = ('import numpy as np; from suspension_tuning.evaluation import evaluate; '
-            f"print(repr(float(evaluate('handling', np.array({x}), "
-            "integrator='variable_step').f[0])))")
-    env = {**os.environ, 'NUMBA_CACHE_DIR': str(tmp_path / 'numba')}
+            'from suspension_tuning.vehicle._variable_step import integrate_variable as k; '
+            f"f = evaluate('handling', np.array({x}), integrator='variable_step').f[0]; "
+            'print(sum(k.stats.cache_hits.values()), sum(k.stats.cache_misses.values())); '
+            'print(repr(float(f)))')
+    env = dict(os.environ)
+    if not compiled_here:
+        env['NUMBA_CACHE_DIR'] = str(tmp_path / 'numba')
     child = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
                            text=True, timeout=600, check=True)
-    here = evaluate('handling', np.array(x), integrator='variable_step').f[0]
-    assert float(child.stdout.strip().splitlines()[-1]) == here
+    counts, f_child = child.stdout.strip().splitlines()[-2:]
+    hits, misses = map(int, counts.split())
+    if compiled_here:
+        assert (hits, misses) == (1, 0), f'the child did not load the kernel from the cache ' \
+                                         f'at {kernel.stats.cache_path}'
+    else:
+        assert (hits, misses) == (0, 1), 'the child did not compile the kernel afresh'
+    assert float(f_child) == here
+
 
 def test_variable_step_noise_in_f_is_over_100_times_the_fixed_step_noise():
     # The paper's "severe numerical noise" (section 4.1, Fig. 7): the error-controlled

@@ -313,7 +313,8 @@ class TuningGraph:
 def tuning_graph(context: Context | None = None, **options: Any) -> Iterator[TuningGraph]:
     """A :class:`TuningGraph` (same options), shut down after the block.
 
-    Without ``context``, the graph gets an :func:`isolated_context` of its own.
+    Without ``context``, the graph gets an :func:`isolated_context` of its own, on the
+    process's domain, reserved on the machine while the block runs.
 
     Raises
     ------

@@ -12,7 +12,7 @@ import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -31,8 +31,8 @@ from rclpy.task import Future
 
 from suspension_tuning.testing._environment import (
     assert_loopback,
-    default_domain_id,
     loopback_environment,
+    reserved_domain,
 )
 
 #: Longest wait for an answer unless told otherwise, s: a guard against a hang, long
@@ -74,16 +74,25 @@ def isolated_context(domain_id: int | None = None) -> Iterator[Context]:
     Parameters
     ----------
     domain_id : int, optional
-        The ROS domain; by default :func:`default_domain_id` (10..99 from the process
-        id), the same for every context of the process.
+        The ROS domain, used as given (to join a graph of another process, say).  By
+        default the process's reserved domain (:func:`reserved_domain`): a pytest
+        session's, else a free one of 10..99, reserved on the machine while the block
+        runs; every context of the process without a domain id shares it.
+
+    Raises
+    ------
+    DomainInUseError
+        Without ``domain_id``, if no domain of 10..99 is free on the machine.
 
     Examples
     --------
     >>> with isolated_context() as context:                         # doctest: +SKIP
     ...     node = rclpy.create_node('probe', context=context)
     """
-    domain = default_domain_id() if domain_id is None else int(domain_id)
-    with loopback_environment(domain):
+    with ExitStack() as stack:
+        domain = (stack.enter_context(reserved_domain()) if domain_id is None
+                  else int(domain_id))
+        stack.enter_context(loopback_environment(domain))
         assert_loopback(domain)
         context = Context()
         rclpy.init(context=context, domain_id=domain)

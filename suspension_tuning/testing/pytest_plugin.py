@@ -1,14 +1,16 @@
 """pytest plugin of the testing kit (entry point ``pytest11``: ``suspension_tuning``).
 
 Loaded by pytest whenever the package is installed; ``-p no:suspension_tuning``
-turns it off.  At the start of the session it keeps DDS discovery on loopback and
-picks the session's ROS domain (:func:`apply_loopback_environment`), before any test
-starts rclpy; the fixtures are listed in :mod:`suspension_tuning.testing`.
+turns it off.  At the start of the session it reserves the session's ROS domain on
+the machine (:func:`reserved_domain`, held until the session ends) and keeps DDS
+discovery on loopback (:func:`apply_loopback_environment`), before any test starts
+rclpy; the fixtures are listed in :mod:`suspension_tuning.testing`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
@@ -16,33 +18,54 @@ import pytest
 from rclpy.context import Context
 
 from suspension_tuning.testing import (
+    DomainInUseError,
     SpinningExecutor,
     TuningGraph,
     apply_loopback_environment,
-    default_domain_id,
     isolated_context,
     raise_callback_errors,
+    reserved_domain,
     spinning_executor,
 )
 
 _DOMAIN_ID = pytest.StashKey[int]()
+_RESERVATION = pytest.StashKey[AbstractContextManager[int]]()
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
-    """``--ros-domain-id``: the session's ROS domain (default 10..99 from the pid)."""
+    """``--ros-domain-id``: the session's ROS domain (default: a free one of 10..99)."""
     group = parser.getgroup('suspension_tuning', 'suspension_tuning testing kit')
     group.addoption('--ros-domain-id', type=int, default=None, dest='ros_domain_id',
-                    help='ROS_DOMAIN_ID of the ROS tests (default: 10 + pid %% 90)')
+                    help='ROS_DOMAIN_ID of the ROS tests, reserved for the session; '
+                         'fails if another session holds it (default: the first free '
+                         'one of 10..99 from 10 + pid %% 90 on)')
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Loopback discovery and the session's domain, before any test starts rclpy."""
-    domain = config.getoption('ros_domain_id')
-    domain = default_domain_id() if domain is None else domain
+    """The session's domain, reserved, and loopback discovery, before rclpy starts."""
+    wanted = config.getoption('ros_domain_id')
+    reservation = reserved_domain(wanted)
+    try:
+        domain = reservation.__enter__()
+    except DomainInUseError as error:
+        raise pytest.UsageError(
+            f'--ros-domain-id {wanted}: {error}.  Choose another with --ros-domain-id N, '
+            'or leave the option out: the session then takes a free domain.') from None
+    except ValueError as error:
+        raise pytest.UsageError(f'--ros-domain-id {wanted}: {error}') from None
+    config.stash[_RESERVATION] = reservation
     apply_loopback_environment(domain)
     config.stash[_DOMAIN_ID] = domain
     config.addinivalue_line(
         'markers', 'ros: uses rclpy and DDS (loopback only, the session\'s own domain id)')
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    """Release the session's domain."""
+    reservation = config.stash.get(_RESERVATION, None)
+    if reservation is not None:
+        del config.stash[_RESERVATION]
+        reservation.__exit__(None, None, None)
 
 
 @pytest.fixture(scope='session')

@@ -247,6 +247,11 @@ def integrate_variable(
     ctrl_on = C[C_STEER_ON] > 0.0 or C[C_SPEED_ON] > 0.0
     cont = continuous and ctrl_on
     sampled = ctrl_on and not cont
+    # Run-time booleans and integers for the calls below: numba compiles a called
+    # function once more for each literal argument (True, False, 0), and _rhs takes
+    # _kernel.deriv along (three more compilations, ~10 s of a first compile).
+    outputs = n_steps >= 0  # True
+    no_outputs = not outputs
     for bi in prange(n_b):
         kk = np.empty((7, n))
         tmp = np.empty(n)
@@ -279,9 +284,10 @@ def integrate_variable(
             t_abs0 = a * dt
             # first stage at the segment start: also the outputs of grid point j
             _rhs(s, kk[0], cont, ss, uin, P, Minv, pc, dk, dv, ds, rx0, rdx, rzl, rzr, full,
-                 hist, True, work, C, ytab, cscr)  # fmt: skip
+                 hist, outputs, work, C, ytab, cscr)  # fmt: skip
             stats[bi, S_CALLS] += 1.0
-            hj = _emit(full_out, hist_out, bi, j, hj, full, hist, step0, decim)
+            hj = _emit(full_out, hist_out, np.int64(bi), np.int64(j), np.int64(hj), full, hist,
+                       step0, decim)
             m = 1  # next grid point inside the segment (local index)
             tau = 0.0
             rejected = False
@@ -305,7 +311,7 @@ def integrate_variable(
                         for i in range(n):
                             yd[i] = tmp[i]  # the propagated solution y1
                     _rhs(tmp, kk[st], cont, ss, uin, P, Minv, pc, dk, dv, ds, rx0, rdx, rzl,
-                         rzr, full, hist, False, work, C, ytab, cscr)  # fmt: skip
+                         rzr, full, hist, no_outputs, work, C, ytab, cscr)  # fmt: skip
                 stats[bi, S_CALLS] += ns - 1.0
                 err = 0.0
                 for i in range(n):
@@ -343,9 +349,10 @@ def integrate_variable(
                                 r4 *= h
                                 tmp[i] = y0[i] + th * (r1 + th1 * (r2 + th * (r3 + th1 * r4)))
                         _rhs(tmp, dscr, cont, ss, uin, P, Minv, pc, dk, dv, ds, rx0, rdx, rzl,
-                             rzr, full, hist, True, work, C, ytab, cscr)  # fmt: skip
+                             rzr, full, hist, outputs, work, C, ytab, cscr)  # fmt: skip
                         stats[bi, S_CALLS] += 1.0
-                        hj = _emit(full_out, hist_out, bi, j + m, hj, full, hist, step0, decim)
+                        hj = _emit(full_out, hist_out, np.int64(bi), np.int64(j + m),
+                                   np.int64(hj), full, hist, step0, decim)
                         m += 1
                     for i in range(n):
                         s[i] = yd[i]

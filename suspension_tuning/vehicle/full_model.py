@@ -47,6 +47,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 from scipy import linalg, ndimage, optimize
 
@@ -60,6 +61,15 @@ from .params import IntegratorSettings, VehicleParams, load_vehicle_params, with
 CORNERS = ('FL', 'FR', 'RL', 'RR')
 AXLES = ('front', 'rear')
 VERTICAL_DOFS = ('zs', 'theta', 'phi_f', 'phi_r', 'zaf', 'phiaf', 'zar', 'phiar')
+#: A kernel call of fewer design-steps (designs x steps) than this runs on one thread.
+#: The kernels' parallel loop is over designs, and starting its threads costs 50 us on
+#: an idle two-core machine and up to 3 ms on a loaded one, against about 3 us of work
+#: a design-step: step-locked runs (the closed-loop scenario, a model behind an FMU)
+#: call the kernel every control period or every step, and ran up to 300 times slower
+#: on two threads (measured: 2.7 ms against 9 us a step of one design).  1000
+#: design-steps are a few ms of work, where a second thread saves at most half.  The
+#: bits do not depend on it: designs are independent.
+SERIAL_BELOW_DESIGN_STEPS = 1000
 PATH_TABLE_DX_M = 0.05  # [m] tabulation step of the driver's reference path (C1 path:
 # linear-interpolation error ~ dx^2 y''/8, below 1e-5 m for the ISO 3888-1 transitions)
 FULL_CHANNELS = (
@@ -783,6 +793,17 @@ class FullVehicleModel:
         self._wall += time.perf_counter() - t0
 
     def _run_kernel(self, n: int) -> None:
+        threads = numba.get_num_threads()
+        serial = threads > 1 and self.batch_size * n < SERIAL_BELOW_DESIGN_STEPS
+        if serial:
+            numba.set_num_threads(1)  # for this thread's calls only
+        try:
+            self._run_kernel_calls(n)
+        finally:
+            if serial:
+                numba.set_num_threads(threads)
+
+    def _run_kernel_calls(self, n: int) -> None:
         b = self.batch_size
         if self._record:
             full = RECORDING.empty((b, K.N_FULL, n))
