@@ -143,6 +143,12 @@ def test_sigterm_stops_the_graph_mid_goal_within_5_s_and_closes_the_runs_bag(
     executor.add(client_node)
     client = ActionClient(client_node, Optimise, '/coordinator/optimise')
     assert client.wait_for_server(timeout_sec=60.0), graph.log
+    # The recorder has caught up with the run before (its bag closed): on a loaded
+    # machine a run's telemetry burst keeps it busy for seconds.
+    deadline = time.monotonic() + 60.0
+    while not all((bag / 'metadata.yaml').is_file() for bag in bags.glob('*_*')):
+        assert time.monotonic() < deadline, 'the earlier run\'s bag was not closed'
+        time.sleep(0.2)
     iterating = threading.Event()
     # Full-model gradients, 2n + 1 = 9 full runs per iteration, up to 30 iterations: the
     # goal runs on for seconds after its first iteration.
