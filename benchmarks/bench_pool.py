@@ -17,10 +17,11 @@ lines:
   all of them.  Four processes on this 2-core machine show what oversubscription costs.
 - ``pool_speedup_calibration_2_workers``: the 1-worker median over the 2-worker median
   (target >= 1.7 on 2 cores; the default cut makes 6 pieces of 3, 3, 3, 3, 2 and 2
-  designs, which fall 8 and 8 on two equal workers); ``..._pairs_min`` and ``..._pairs_max``: the lowest and highest ratio of two
-  runs of the same round; ``..._4_pieces``: the same with ``pieces_per_worker`` 4 (8
-  pieces of 2 designs, 8 designs on each worker; ``calibration_wall_s_2_workers_4_pieces``
-  is its wall time), a fourth pool in each round.
+  designs, which fall 8 and 8 on two equal workers); ``..._pairs_min`` and
+  ``..._pairs_max``: the lowest and highest ratio of two runs of the same round;
+  ``..._4_pieces``: the same with ``pieces_per_worker`` 4 (8 pieces of 2 designs, 8
+  designs on each worker; ``calibration_wall_s_2_workers_4_pieces`` is its wall time),
+  a fourth pool in each round.
 - ``other_users_cores_during_calibration``: the cores the machine spent on other
   processes meanwhile (/proc; the machine is shared): with one core taken the 2-worker
   figure falls to about 1; ``other_users_cores_per_round``: the same per round.
