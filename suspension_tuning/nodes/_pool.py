@@ -173,7 +173,6 @@ class SimulationPool:
         self.workers: dict[str, Worker] = {}
         self.events: collections.deque[PoolEvent] = collections.deque(maxlen=500)
         self.fingerprint = ''
-        self.calls = 0
         self._lock = threading.RLock()
         self._news = threading.Condition(self._lock)
         self.refresh()
@@ -449,7 +448,6 @@ class SimulationPool:
                         future.add_done_callback(self._notify)
                         worker.last_sent_s = time.monotonic()
                         running[worker.name] = (index, future, worker.last_sent_s)
-                        self.calls += 1
                     if not running:
                         waiting_since = waiting_since or time.monotonic()
                         if time.monotonic() - waiting_since > JOIN_WAIT_S:

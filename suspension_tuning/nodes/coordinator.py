@@ -296,6 +296,15 @@ class CoordinatorNode(Node):
             return
         running.publish_feedback(Optimise.Feedback(phase='pool', note=event.text))
 
+    def _check_pool(self, goal_handle) -> str:
+        """The workers' one model for ``goal_handle`` (SimulationPool.check_models).
+
+        Workers that joined until now are the goal's own (:meth:`_on_pool_event`).
+        """
+        fingerprint = self.pool.check_models()
+        self._pool_checked = (goal_handle, time.monotonic())
+        return fingerprint
+
     def _cancel_requested(self) -> bool:
         running = self._running
         return running is not None and (running is self._cancelling
@@ -519,8 +528,7 @@ class CoordinatorNode(Node):
             goal_handle.abort()
             return Optimise.Result(success=False, message=f'bad goal: {error}')
         try:
-            fingerprint = self.pool.check_models()
-            self._pool_checked = (goal_handle, time.monotonic())
+            fingerprint = self._check_pool(goal_handle)
             refusal = None
         except (ValueError, ServiceCallError) as error:
             fingerprint, refusal = '', error
@@ -583,8 +591,7 @@ class CoordinatorNode(Node):
             return Optimise.Result(success=False, message='cancelled before it started')
         refusal = None
         try:
-            fingerprint = self.pool.check_models()
-            self._pool_checked = (goal_handle, time.monotonic())
+            fingerprint = self._check_pool(goal_handle)
         except (ValueError, ServiceCallError) as error:
             refusal = error
         # The run configuration records every worker's model, also for a refused goal.
