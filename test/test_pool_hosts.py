@@ -104,6 +104,29 @@ class Hosts:
         _ip('-n', coord, 'link', 'set', bridge, 'up')
         for name in self.names.values():
             _ip('-n', name, 'link', 'set', 'lo', 'up')
+        self._wait_links_up([(coord, bridge), *((self.names[host], f'{self.prefix}{host}e')
+                                                 for host in ('w1', 'w2'))])
+
+    @staticmethod
+    def _wait_links_up(links: list[tuple[str, str]], timeout_s: float = 10.0) -> None:
+        """Wait until every (namespace, device) has carrier (operstate UP).
+
+        The bridge gets carrier only once a port's veth peer is up, a moment after
+        ``ip link set up``.  Fast DDS picks its unicast interfaces when a participant
+        is created: a process started before that never sends to its static peers
+        (the same holds for a node started before a host's network is up: systemd's
+        ``After=network-online.target``, docs/distributed.md).
+        """
+        deadline = time.monotonic() + timeout_s
+        for namespace, device in links:
+            while True:
+                shown = json.loads(_ip('-j', '-n', namespace, 'link', 'show', 'dev',
+                                       device).stdout)
+                if shown and shown[0].get('operstate') == 'UP':
+                    break
+                assert time.monotonic() < deadline, (
+                    f'{device} in {namespace} not up within {timeout_s} s: {shown}')
+                time.sleep(0.05)
 
     def down(self) -> None:
         for process in self.processes:
