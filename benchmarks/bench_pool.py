@@ -41,9 +41,8 @@ lines:
   workers offer a liveliness lease of 0.5 s (``liveliness_lease_s``), the pool requests
   2 s (``worker_loss_timeout_s``): target <= 3 s.  ``pieces_declared_hung``: pieces the
   pools sent again because a living worker did not answer within ``design_timeout_s``
-  (5 s per design here; 0 expected).  The new worker takes a new name: one restarted
-  under the killed one's name while the dead process is still listed (its DDS lease,
-  20 s) may never receive the first piece the pool sends it.
+  (5 s per design here; 0 expected).  The new worker takes a new name (a worker
+  restarted under its name is taken back once it answers a ping: test_worker_pool.py).
 
 DDS stays on loopback with a domain of its own; the worker processes are stopped with
 SIGINT at the end and the shared-memory segments of the killed ones cleaned.

@@ -22,7 +22,7 @@ pytestmark = pytest.mark.ros
 
 
 class StandIn:
-    """A worker serving ``/<name>/evaluate`` and a latched, live ``/<name>/model``."""
+    """A worker serving ``/<name>/evaluate`` (pings too) and a latched, live ``/<name>/model``."""
 
     #: The test session's ROS domain (set by the ``stand_in`` fixture).
     domain_id = 0
@@ -45,6 +45,10 @@ class StandIn:
         stack.enter_context(spinning_executor(self.context, num_threads=1)).add(self.node)
 
     def _evaluate(self, request, response):
+        response.model_fingerprint = self.fingerprint
+        if not request.scenario and not request.designs:  # a ping, as full_vehicle_sim
+            response.success = True
+            return response
         x = np.reshape(request.designs, (-1, request.n_vars))
         time.sleep(self.delay_s * len(x))
         self.designs += len(x)

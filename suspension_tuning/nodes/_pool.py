@@ -16,6 +16,13 @@ used again once it is back (a new model description, or its liveliness regained 
 the next goal's :meth:`SimulationPool.check_models`).  A design gives the same bits
 alone or in a batch, so how the pieces fall does not change a result.
 
+A worker gets pieces only once it has answered a ping (an ``evaluate`` request with
+no scenario and no designs) since it joined, came back or failed.  A worker process
+restarted under the same name while the dead one is still listed on the graph (its
+DDS lease, 20 s by default) looks ready before its ``evaluate`` is matched: a request
+sent then is lost, and the piece would wait ``design_timeout_s`` per design.  Pings
+are sent again, ever less often, until one is answered.
+
 Every change of membership (joined, lost, refused for another model, back) is
 reported through ``on_event`` and kept in :attr:`SimulationPool.events`.
 """
@@ -51,6 +58,9 @@ EVALUATE_TYPE = 'suspension_tuning_interfaces/srv/EvaluateDesign'
 POLL_S = 1.0
 #: Time to wait for a worker when none is usable, s (one restarting, one joining).
 JOIN_WAIT_S = 5.0
+#: First and longest wait for a ping's answer before it is sent again, s (doubling:
+#: a worker busy with another pool's piece answers after that piece).
+PING_RETRY_S = (0.5, 8.0)
 
 
 def model_qos(lease_s: float) -> QoSProfile:
@@ -113,6 +123,10 @@ class Worker:
     gone: bool = False  #: its liveliness was lost and has not come back
     failed: str = ''  #: why it is not used until it is back ('' = not failed)
     refused: str = ''  #: why its model is not the pool's ('' = not refused)
+    ready: bool = False  #: answered a ping since it joined, came back or failed
+    ping: Any = None  #: the future of the ping in flight
+    ping_sent_s: float = 0.0
+    ping_wait_s: float = PING_RETRY_S[0]
     last_sent_s: float = 0.0
     designs: int = 0  #: designs it answered
     busy_s: float = 0.0  #: time its pieces took, s
@@ -200,6 +214,36 @@ class SimulationPool:
             for name in [*self.allow, *found]:
                 if name not in self.workers and self.wanted(name):
                     self._add(name)
+            for worker in self.workers.values():
+                self._ping(worker)
+
+    def _ping(self, worker: Worker) -> None:
+        """Ping a worker that is up but not ready (again, once the last ping is overdue)."""
+        if (worker.ready or worker.model is None or not worker.alive or worker.failed
+                or not worker.client.service_is_ready()):
+            return
+        now = time.monotonic()
+        if worker.ping is not None:
+            if now - worker.ping_sent_s < worker.ping_wait_s:
+                return
+            worker.client.remove_pending_request(worker.ping)
+            worker.ping_wait_s = min(2.0 * worker.ping_wait_s, PING_RETRY_S[1])
+        future = worker.client.call_async(EvaluateDesign.Request())
+        worker.ping, worker.ping_sent_s = future, now
+        future.add_done_callback(lambda done: self._on_pong(worker, done))
+
+    def _on_pong(self, worker: Worker, future: Any) -> None:
+        with self._news:
+            if future is worker.ping and future.exception() is None:
+                worker.ready, worker.ping = True, None
+                worker.ping_wait_s = PING_RETRY_S[0]
+                self._news.notify_all()
+
+    def _not_ready(self, worker: Worker) -> None:
+        """The worker must answer a ping before it gets a piece again."""
+        if worker.ping is not None:
+            worker.client.remove_pending_request(worker.ping)
+        worker.ready, worker.ping, worker.ping_wait_s = False, None, PING_RETRY_S[0]
 
     def _add(self, name: str) -> None:
         client = self.node.create_client(EvaluateDesign, f'{name}/evaluate',
@@ -231,6 +275,7 @@ class SimulationPool:
             first, worker.model, worker.alive = worker.model is None, description(msg.data), True
             if worker.failed or worker.gone:  # a restarted process describes its model again
                 worker.failed, worker.gone = '', False
+                self._not_ready(worker)
                 events.append(('back', f'worker {name} is back (model {worker.fingerprint})'))
             elif first:
                 events.append(('joined', f'worker {name} joined (model {worker.fingerprint})'))
@@ -238,6 +283,7 @@ class SimulationPool:
             if self.fingerprint and worker.fingerprint != self.fingerprint:
                 worker.refused = self._refusal(worker)
                 events.append(('refused', worker.refused))
+            self._ping(worker)
             self._news.notify_all()
         for kind, text in events:
             self._event(kind, text, name, arrived)
@@ -256,8 +302,10 @@ class SimulationPool:
                 if worker.gone:
                     worker.gone, worker.failed = False, ''
                     event = ('back', f'worker {name} is back')
+                self._ping(worker)
             elif worker.alive and not self._in_this_process(name):
                 worker.alive, worker.gone = False, True
+                self._not_ready(worker)
                 event = ('lost', f'worker {name} lost: no sign of life within '
                          f'{self.loss_timeout_s:g} s (its process ended or its host is '
                          'unreachable)')
@@ -289,7 +337,7 @@ class SimulationPool:
 
     def _usable(self, worker: Worker) -> bool:
         return (worker.model is not None and worker.alive and not worker.failed
-                and not worker.refused and worker.client.service_is_ready())
+                and not worker.refused and worker.ready and worker.client.service_is_ready())
 
     @property
     def alive(self) -> list[str]:
@@ -314,6 +362,7 @@ class SimulationPool:
             for worker in self.workers.values():
                 if worker.failed and worker.alive and worker.client.service_is_ready():
                     worker.failed = ''
+                    self._ping(worker)
 
     def cancel_runs(self) -> None:
         """Ask every worker to stop its FMU run in progress (``~/cancel``; no wait)."""
@@ -450,9 +499,15 @@ class SimulationPool:
                         running[worker.name] = (index, future, worker.last_sent_s)
                     if not running:
                         waiting_since = waiting_since or time.monotonic()
-                        if time.monotonic() - waiting_since > JOIN_WAIT_S:
-                            raise PoolError('no simulation worker left: every worker failed '
-                                            f'or is gone ({self.looked_for()})')
+                        pinged = [w.name for w in self.workers.values() if w.ping is not None
+                                  and not w.failed and not w.refused and w.alive]
+                        waited = time.monotonic() - waiting_since
+                        if waited > (self.design_timeout_s if pinged else JOIN_WAIT_S):
+                            raise PoolError(
+                                'no simulation worker left: every worker failed or is gone '
+                                f'({self.looked_for()})' + (
+                                    f'; {", ".join(pinged)} did not answer a ping within '
+                                    f'{waited:.0f} s' if pinged else ''))
                     else:
                         waiting_since = None
                     self._news.wait(0.1 if not running else POLL_S)
@@ -516,6 +571,7 @@ class SimulationPool:
     def _fail(self, worker: Worker, reason: str, index: int, n: int,
               queue: collections.deque) -> None:
         worker.failed = reason
+        self._not_ready(worker)
         queue.appendleft(index)
         self._event('resent', f'worker {worker.name} {reason}; its {n} design(s) are sent '
                     'to another worker', worker.name)

@@ -5,7 +5,9 @@ objective f (eq. 9 or 10), the tyre-hop constraints g (eq. 11), named metrics, t
 simplified models' inputs of each design and the wall time out.  A bad request
 (unknown scenario, wrong length, NaN, out of bounds, more designs than parameter
 ``max_designs_per_request``, default 128) gets ``success = false`` and the reason in
-``error``, at once and without a run; the node keeps serving.  A request's ``road``
+``error``, at once and without a run; the node keeps serving.  A request with no
+scenario and no designs is a ping: ``success = true``, no designs, the model's
+fingerprint (a pool sends one before a worker's first piece).  A request's ``road``
 drives the ride and mixed scenarios on another road than config/scenarios.yaml's (a road of
 config/road.yaml, a road file or an entry, :func:`suspension_tuning.vehicle.road.
 resolve_road`); a bad or too short road file is such a bad request.
@@ -242,6 +244,9 @@ class FullVehicleSimNode(Node):
                      response: EvaluateDesign.Response) -> EvaluateDesign.Response:
         start = time.monotonic()
         response.model_fingerprint = self.model_fingerprint
+        if not request.scenario and not request.designs:  # a pool's ping
+            response.success = True
+            return response
         self.evaluate_calls += 1
         try:
             designs = evaluation.parse_designs(request.scenario, int(request.n_vars),
