@@ -47,7 +47,7 @@ if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
 
 #: Run in a child process while the first tests run: a kernel they do not need, which
 #: numba compiles on a fresh checkout (single-threaded: the simplified handling model,
-#: ~15 s on an idle machine) and caches; the tests that need it minutes later load it
+#: ~18 s on a shared 2-core machine) and caches; the tests that need it minutes later load it
 #: from numba's cache instead of compiling it.  The full model's fixed-step kernel and
 #: the simplified ride model are needed within seconds (test_buffers.py,
 #: test_calibration_workers.py); the variable-step kernel is left to the session, whose

@@ -170,132 +170,144 @@ def pp_integrate(states, sstates, P, dk, dv, ds, zf, zfd, zr, zrd, dt, n_steps, 
     k (first RK stage, no extra cost).
     Same equations as :func:`pp_deriv`, written on scalars for speed.
     """
+    # The loop over designs only calls the design's own integration: numba's parallel
+    # passes then see a small loop body, and the first compile takes 22 s instead of
+    # 61 s (handling: 18 s instead of 38 s; 2 shared cores), for the same bits and the
+    # same time per gradient within the machine's noise (bench_gradient.py).
+    for bi in prange(states.shape[0]):
+        _pp_integrate_design(np.int64(bi), states, sstates, P, dk, dv, ds, zf, zfd, zr, zrd, dt,
+                             n_steps, out)
+
+
+@njit(cache=True, error_model='numpy')
+def _pp_integrate_design(bi, states, sstates, P, dk, dv, ds, zf, zfd, zr, zrd, dt, n_steps,
+                         out):
+    """RK4 of design ``bi`` for :func:`pp_integrate`."""
     h2 = 0.5 * dt
     h6 = dt / 6.0
     xd = P[PP_XD]
     xp = P[PP_XP]
-    for bi in prange(states.shape[0]):
-        ssf = sstates[bi, 0]
-        ssr = sstates[bi, 1]
-        q0, q1, q2, q3, v0, v1, v2, v3 = (
-            states[bi, 0],
-            states[bi, 1],
-            states[bi, 2],
-            states[bi, 3],
-            states[bi, 4],
-            states[bi, 5],
-            states[bi, 6],
-            states[bi, 7],
+    ssf = sstates[bi, 0]
+    ssr = sstates[bi, 1]
+    q0, q1, q2, q3, v0, v1, v2, v3 = (
+        states[bi, 0],
+        states[bi, 1],
+        states[bi, 2],
+        states[bi, 3],
+        states[bi, 4],
+        states[bi, 5],
+        states[bi, 6],
+        states[bi, 7],
+    )
+    for k in range(n_steps):
+        j = 2 * k
+        a0, a1, a2, a3, tf, tr, ff, fr = _pp_acc(
+            q0,
+            q1,
+            q2,
+            q3,
+            v0,
+            v1,
+            v2,
+            v3,
+            ssf,
+            ssr,
+            P,
+            dk,
+            dv,
+            ds,
+            zf[j],
+            zfd[j],
+            zr[j],
+            zrd[j],
         )
-        for k in range(n_steps):
-            j = 2 * k
-            a0, a1, a2, a3, tf, tr, ff, fr = _pp_acc(
-                q0,
-                q1,
-                q2,
-                q3,
-                v0,
-                v1,
-                v2,
-                v3,
-                ssf,
-                ssr,
-                P,
-                dk,
-                dv,
-                ds,
-                zf[j],
-                zfd[j],
-                zr[j],
-                zrd[j],
-            )
-            out[bi, k, O_ACC_D] = a0 - xd * a1
-            out[bi, k, O_ACC_P] = a0 - xp * a1
-            out[bi, k, O_FZF] = tf
-            out[bi, k, O_FZR] = tr
-            out[bi, k, O_ZS] = q0
-            out[bi, k, O_TH] = q1
-            out[bi, k, O_FSF] = ff
-            out[bi, k, O_FSR] = fr
-            # stage 2
-            p0, p1, p2, p3 = q0 + h2 * v0, q1 + h2 * v1, q2 + h2 * v2, q3 + h2 * v3
-            w0, w1, w2, w3 = v0 + h2 * a0, v1 + h2 * a1, v2 + h2 * a2, v3 + h2 * a3
-            b0, b1, b2, b3, _, _, _, _ = _pp_acc(
-                p0,
-                p1,
-                p2,
-                p3,
-                w0,
-                w1,
-                w2,
-                w3,
-                ssf,
-                ssr,
-                P,
-                dk,
-                dv,
-                ds,
-                zf[j + 1],
-                zfd[j + 1],
-                zr[j + 1],
-                zrd[j + 1],
-            )
-            # stage 3
-            p0, p1, p2, p3 = q0 + h2 * w0, q1 + h2 * w1, q2 + h2 * w2, q3 + h2 * w3
-            u0, u1, u2, u3 = v0 + h2 * b0, v1 + h2 * b1, v2 + h2 * b2, v3 + h2 * b3
-            c0, c1, c2, c3, _, _, _, _ = _pp_acc(
-                p0,
-                p1,
-                p2,
-                p3,
-                u0,
-                u1,
-                u2,
-                u3,
-                ssf,
-                ssr,
-                P,
-                dk,
-                dv,
-                ds,
-                zf[j + 1],
-                zfd[j + 1],
-                zr[j + 1],
-                zrd[j + 1],
-            )
-            # stage 4
-            p0, p1, p2, p3 = q0 + dt * u0, q1 + dt * u1, q2 + dt * u2, q3 + dt * u3
-            y0, y1, y2, y3 = v0 + dt * c0, v1 + dt * c1, v2 + dt * c2, v3 + dt * c3
-            d0, d1, d2, d3, _, _, _, _ = _pp_acc(
-                p0,
-                p1,
-                p2,
-                p3,
-                y0,
-                y1,
-                y2,
-                y3,
-                ssf,
-                ssr,
-                P,
-                dk,
-                dv,
-                ds,
-                zf[j + 2],
-                zfd[j + 2],
-                zr[j + 2],
-                zrd[j + 2],
-            )
-            q0 += h6 * (v0 + 2.0 * w0 + 2.0 * u0 + y0)
-            q1 += h6 * (v1 + 2.0 * w1 + 2.0 * u1 + y1)
-            q2 += h6 * (v2 + 2.0 * w2 + 2.0 * u2 + y2)
-            q3 += h6 * (v3 + 2.0 * w3 + 2.0 * u3 + y3)
-            v0 += h6 * (a0 + 2.0 * b0 + 2.0 * c0 + d0)
-            v1 += h6 * (a1 + 2.0 * b1 + 2.0 * c1 + d1)
-            v2 += h6 * (a2 + 2.0 * b2 + 2.0 * c2 + d2)
-            v3 += h6 * (a3 + 2.0 * b3 + 2.0 * c3 + d3)
-        states[bi, 0], states[bi, 1], states[bi, 2], states[bi, 3] = q0, q1, q2, q3
-        states[bi, 4], states[bi, 5], states[bi, 6], states[bi, 7] = v0, v1, v2, v3
+        out[bi, k, O_ACC_D] = a0 - xd * a1
+        out[bi, k, O_ACC_P] = a0 - xp * a1
+        out[bi, k, O_FZF] = tf
+        out[bi, k, O_FZR] = tr
+        out[bi, k, O_ZS] = q0
+        out[bi, k, O_TH] = q1
+        out[bi, k, O_FSF] = ff
+        out[bi, k, O_FSR] = fr
+        # stage 2
+        p0, p1, p2, p3 = q0 + h2 * v0, q1 + h2 * v1, q2 + h2 * v2, q3 + h2 * v3
+        w0, w1, w2, w3 = v0 + h2 * a0, v1 + h2 * a1, v2 + h2 * a2, v3 + h2 * a3
+        b0, b1, b2, b3, _, _, _, _ = _pp_acc(
+            p0,
+            p1,
+            p2,
+            p3,
+            w0,
+            w1,
+            w2,
+            w3,
+            ssf,
+            ssr,
+            P,
+            dk,
+            dv,
+            ds,
+            zf[j + 1],
+            zfd[j + 1],
+            zr[j + 1],
+            zrd[j + 1],
+        )
+        # stage 3
+        p0, p1, p2, p3 = q0 + h2 * w0, q1 + h2 * w1, q2 + h2 * w2, q3 + h2 * w3
+        u0, u1, u2, u3 = v0 + h2 * b0, v1 + h2 * b1, v2 + h2 * b2, v3 + h2 * b3
+        c0, c1, c2, c3, _, _, _, _ = _pp_acc(
+            p0,
+            p1,
+            p2,
+            p3,
+            u0,
+            u1,
+            u2,
+            u3,
+            ssf,
+            ssr,
+            P,
+            dk,
+            dv,
+            ds,
+            zf[j + 1],
+            zfd[j + 1],
+            zr[j + 1],
+            zrd[j + 1],
+        )
+        # stage 4
+        p0, p1, p2, p3 = q0 + dt * u0, q1 + dt * u1, q2 + dt * u2, q3 + dt * u3
+        y0, y1, y2, y3 = v0 + dt * c0, v1 + dt * c1, v2 + dt * c2, v3 + dt * c3
+        d0, d1, d2, d3, _, _, _, _ = _pp_acc(
+            p0,
+            p1,
+            p2,
+            p3,
+            y0,
+            y1,
+            y2,
+            y3,
+            ssf,
+            ssr,
+            P,
+            dk,
+            dv,
+            ds,
+            zf[j + 2],
+            zfd[j + 2],
+            zr[j + 2],
+            zrd[j + 2],
+        )
+        q0 += h6 * (v0 + 2.0 * w0 + 2.0 * u0 + y0)
+        q1 += h6 * (v1 + 2.0 * w1 + 2.0 * u1 + y1)
+        q2 += h6 * (v2 + 2.0 * w2 + 2.0 * u2 + y2)
+        q3 += h6 * (v3 + 2.0 * w3 + 2.0 * u3 + y3)
+        v0 += h6 * (a0 + 2.0 * b0 + 2.0 * c0 + d0)
+        v1 += h6 * (a1 + 2.0 * b1 + 2.0 * c1 + d1)
+        v2 += h6 * (a2 + 2.0 * b2 + 2.0 * c2 + d2)
+        v3 += h6 * (a3 + 2.0 * b3 + 2.0 * c3 + d3)
+    states[bi, 0], states[bi, 1], states[bi, 2], states[bi, 3] = q0, q1, q2, q3
+    states[bi, 4], states[bi, 5], states[bi, 6], states[bi, 7] = v0, v1, v2, v3
 
 
 @njit(cache=True, inline='always', error_model='numpy')
@@ -366,37 +378,46 @@ def h_integrate(states, sstates, P, dk, dv, ds, pc, slip, delta, dt, n_steps, ou
 
     Outputs ``out[b, k, :]`` (step-major) at the start of each step.
     """
+    # As pp_integrate: the loop over designs only calls the design's own integration.
+    for bi in prange(states.shape[0]):
+        _h_integrate_design(np.int64(bi), states, sstates, P, dk, dv, ds, pc, slip, delta,
+                            dt, n_steps, out)
+
+
+@njit(cache=True, error_model='numpy')
+def _h_integrate_design(bi, states, sstates, P, dk, dv, ds, pc, slip, delta, dt, n_steps,
+                        out):
+    """RK4 of design ``bi`` for :func:`h_integrate`."""
     # The four RK4 stages share one call site of the inlined h_deriv: numba inlines at
     # its IR level, and four inlined copies of the derivative made the first compile
     # take minutes (158 s here) for no speed-up over one copy in a stage loop.
     offsets = (0, 1, 1, 2)  # half-step sample of each stage's inputs
     fractions = (0.0, 0.5, 0.5, 1.0)  # stage point: s + fraction dt k_previous
-    for bi in prange(states.shape[0]):
-        o = np.empty(N_H_OUT)  # per-design scratch (designs run in parallel)
-        dummy = np.empty(N_H_OUT)
-        tmp = np.empty(N_H_STATE)
-        kk = np.empty((4, N_H_STATE))
-        sl = np.empty(4)
-        s = states[bi]
-        ss = sstates[bi]
-        for k in range(n_steps):
-            j = 2 * k
-            for stage in range(4):
-                jj = j + offsets[stage]
-                for c in range(4):
-                    sl[c] = slip[c, jj]
-                if stage == 0:
-                    for i in range(N_H_STATE):
-                        tmp[i] = s[i]
-                else:
-                    step = fractions[stage] * dt
-                    for i in range(N_H_STATE):
-                        tmp[i] = s[i] + step * kk[stage - 1, i]
-                first = stage == 0
-                h_deriv(tmp, ss, P, dk, dv, ds, pc, sl, delta[jj], kk[stage],
-                        o if first else dummy, first)
-                if first:
-                    for c in range(N_H_OUT):
-                        out[bi, k, c] = o[c]
-            for i in range(N_H_STATE):
-                s[i] += dt / 6.0 * (kk[0, i] + 2.0 * kk[1, i] + 2.0 * kk[2, i] + kk[3, i])
+    o = np.empty(N_H_OUT)  # per-design scratch (designs run in parallel)
+    dummy = np.empty(N_H_OUT)
+    tmp = np.empty(N_H_STATE)
+    kk = np.empty((4, N_H_STATE))
+    sl = np.empty(4)
+    s = states[bi]
+    ss = sstates[bi]
+    for k in range(n_steps):
+        j = 2 * k
+        for stage in range(4):
+            jj = j + offsets[stage]
+            for c in range(4):
+                sl[c] = slip[c, jj]
+            if stage == 0:
+                for i in range(N_H_STATE):
+                    tmp[i] = s[i]
+            else:
+                step = fractions[stage] * dt
+                for i in range(N_H_STATE):
+                    tmp[i] = s[i] + step * kk[stage - 1, i]
+            first = stage == 0
+            h_deriv(tmp, ss, P, dk, dv, ds, pc, sl, delta[jj], kk[stage],
+                    o if first else dummy, first)
+            if first:
+                for c in range(N_H_OUT):
+                    out[bi, k, c] = o[c]
+        for i in range(N_H_STATE):
+            s[i] += dt / 6.0 * (kk[0, i] + 2.0 * kk[1, i] + 2.0 * kk[2, i] + kk[3, i])
