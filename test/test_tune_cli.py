@@ -179,8 +179,8 @@ def test_tune_without_a_coordinator_says_so(ros_context):
 
 
 def _serve_and_tune(ros_context, executor, action: str, execute, **server_options):
-    """(server, tune process): a test Optimise server at ``action`` spun by ``executor``,
-    and ``tune --action action`` started against it."""
+    """(node, server, tune process): a test Optimise server at ``action`` on ``node``
+    spun by ``executor``, and ``tune --action action`` started against it."""
     from rclpy.action import ActionServer
     from rclpy.node import Node
     from suspension_tuning_interfaces.action import Optimise
@@ -190,7 +190,7 @@ def _serve_and_tune(ros_context, executor, action: str, execute, **server_option
     executor.add(node)
     process = subprocess.Popen([str(Path(sys.prefix) / 'bin' / 'tune'), '--action', action],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    return server, process
+    return node, server, process
 
 
 def test_tune_says_so_when_the_coordinator_goes_away_before_the_result(ros_context, executor):
@@ -207,10 +207,13 @@ def test_tune_says_so_when_the_coordinator_goes_away_before_the_result(ros_conte
         goal_handle.abort()
         return Optimise.Result()
 
-    server, process = _serve_and_tune(ros_context, executor, '/vanishing/optimise', execute)
+    node, server, process = _serve_and_tune(ros_context, executor, '/vanishing/optimise',
+                                            execute)
     try:
         assert started.wait(60.0), 'the goal never arrived'
-        server.destroy()  # the action server leaves the graph mid-goal
+        # The action server leaves the graph mid-goal (not destroyed under a spin).
+        executor.remove(node)
+        server.destroy()
         _, stderr = process.communicate(timeout=60)
     finally:
         release.set()
@@ -245,9 +248,9 @@ def test_ctrl_c_cancels_the_running_goal_and_exits_130(ros_context, executor):
             goal_handle.abort()
         return Optimise.Result(message='cancelled')
 
-    server, process = _serve_and_tune(ros_context, executor, '/held/optimise', execute,
-                                      cancel_callback=lambda _: CancelResponse.ACCEPT,
-                                      callback_group=ReentrantCallbackGroup())
+    _, server, process = _serve_and_tune(ros_context, executor, '/held/optimise', execute,
+                                         cancel_callback=lambda _: CancelResponse.ACCEPT,
+                                         callback_group=ReentrantCallbackGroup())
     try:
         assert started.wait(60.0), 'the goal never arrived'
         process.send_signal(signal.SIGINT)

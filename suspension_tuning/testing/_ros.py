@@ -132,6 +132,8 @@ class SpinningExecutor:
         self.nodes: list[Node] = []
         self.errors: list[BaseException] = []
         self._stopping = threading.Event()
+        self._laps = 0
+        self._lap = threading.Condition()
         self._thread = threading.Thread(target=self._spin, name=name, daemon=True)
         self._thread.start()
 
@@ -147,12 +149,32 @@ class SpinningExecutor:
                 self.errors.append(error)
                 print(f'{self._thread.name}: a callback raised:', file=sys.stderr)
                 traceback.print_exception(error, file=sys.stderr)
+            with self._lap:
+                self._laps += 1
+                self._lap.notify_all()
 
     def add(self, *nodes: Node) -> None:
         """Spin these nodes too; :meth:`shutdown` destroys them."""
         for node in nodes:
             self.executor.add_node(node)
             self.nodes.append(node)
+
+    def remove(self, node: Node, timeout_s: float = 10.0) -> None:
+        """Stop spinning ``node`` (not destroyed): its entities may be destroyed after.
+
+        Returns once the spinning thread has spun three times since, so that no wait
+        set being built still holds one of its entities (destroying a service or
+        action server under a running spin fails that spin in rclpy: "pointer is
+        invalid").  Callbacks of the node already running go on to their end.
+        """
+        self.executor.remove_node(node)
+        if node in self.nodes:
+            self.nodes.remove(node)
+        with self._lap:
+            until = self._laps + 3
+            self.executor.wake()
+            self._lap.wait_for(lambda: self._laps >= until or not self._thread.is_alive(),
+                               timeout_s)
 
     def stop(self, timeout_s: float = 10.0) -> None:
         """Stop spinning: join the thread, then shut the executor down."""
