@@ -69,7 +69,7 @@ lint: setup
 # the testing kit's pytest plugin, as a user's project would.
 test: lint $(STAMPS)/study-extra
 	$(PY) -m pytest -n 2 --dist loadfile test
-	cd examples/custom_valve_controller && $(abspath $(PY)) -m pytest
+	cd examples/custom_valve_controller && $(abspath $(PY)) -m pytest -n 2
 
 demo: setup
 	$(PY) -m suspension_tuning.demo
