@@ -172,8 +172,10 @@ def pp_integrate(states, sstates, P, dk, dv, ds, zf, zfd, zr, zrd, dt, n_steps, 
     """
     # The loop over designs only calls the design's own integration: numba's parallel
     # passes then see a small loop body, and the first compile takes 22 s instead of
-    # 61 s (handling: 18 s instead of 38 s; 2 shared cores), for the same bits and the
-    # same time per gradient within the machine's noise (bench_gradient.py).
+    # 61 s (handling: 18 s instead of 38 s; 2 shared cores) for the same bits.  A
+    # gradient takes about 20 % longer (bench_gradient.py, 4 variables, 3 runs each:
+    # ride 25-26 ms against 21-22 ms, handling 7.5-8.2 ms against 5.2-7.4 ms): a few
+    # ms per iteration, against a minute saved at every install or change of the model.
     for bi in prange(states.shape[0]):
         _pp_integrate_design(np.int64(bi), states, sstates, P, dk, dv, ds, zf, zfd, zr, zrd, dt,
                              n_steps, out)
