@@ -219,8 +219,7 @@ class SimulationPool:
 
     def _ping(self, worker: Worker) -> None:
         """Ping a worker that is up but not ready (again, once the last ping is overdue)."""
-        if (worker.ready or worker.model is None or not worker.alive or worker.failed
-                or not worker.client.service_is_ready()):
+        if worker.ready or not self._up(worker):
             return
         now = time.monotonic()
         if worker.ping is not None:
@@ -274,8 +273,7 @@ class SimulationPool:
             worker = self.workers[name]
             first, worker.model, worker.alive = worker.model is None, description(msg.data), True
             if worker.failed or worker.gone:  # a restarted process describes its model again
-                worker.failed, worker.gone = '', False
-                self._not_ready(worker)
+                worker.failed, worker.gone = '', False  # not ready since it failed or went
                 events.append(('back', f'worker {name} is back (model {worker.fingerprint})'))
             elif first:
                 events.append(('joined', f'worker {name} joined (model {worker.fingerprint})'))
@@ -335,9 +333,13 @@ class SimulationPool:
             f'worker_loss_timeout_s ({self.loss_timeout_s:g} s): set the worker\'s '
             'liveliness_lease_s below it; until then the pool does not hear from it')
 
-    def _usable(self, worker: Worker) -> bool:
+    def _up(self, worker: Worker) -> bool:
+        """Described, alive, not failed, and its evaluate service matched."""
         return (worker.model is not None and worker.alive and not worker.failed
-                and not worker.refused and worker.ready and worker.client.service_is_ready())
+                and worker.client.service_is_ready())
+
+    def _usable(self, worker: Worker) -> bool:
+        return self._up(worker) and not worker.refused and worker.ready
 
     @property
     def alive(self) -> list[str]:
