@@ -20,6 +20,7 @@ import argparse
 import functools
 import sys
 import threading
+import time
 from collections.abc import Callable, Mapping
 
 import rclpy
@@ -27,7 +28,12 @@ from rclpy.executors import Executor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from suspension_tuning.nodes._spin import executor_for, spin_until_shutdown
+from suspension_tuning.nodes._spin import (
+    end_rclpy,
+    executor_for,
+    settle_signal,
+    spin_until_shutdown,
+)
 
 
 def worker_names(workers: int) -> list[str]:
@@ -127,28 +133,66 @@ class SpinningGraph:
             executor = executor_for(node)
             executor.add_node(node)
             self.executors.append(executor)
-        self.threads = [threading.Thread(target=spin_until_shutdown,
-                                         args=(executor, None, self._stopped), daemon=True)
-                        for executor in self.executors]
+        #: Set when an executor's spin has returned (``wait`` has why not Thread.join).
+        self.spun = [threading.Event() for _ in self.executors]
+        self.threads = [threading.Thread(target=self._spin, args=(executor, done), daemon=True)
+                        for executor, done in zip(self.executors, self.spun)]
         for thread in self.threads:
             thread.start()
 
     def _stopped(self) -> bool:
         return self.stopped
 
-    def wait(self) -> None:
-        """Block until the executors stop (Ctrl-C raises KeyboardInterrupt here)."""
-        for thread in self.threads:
-            while thread.is_alive():
-                thread.join(timeout=0.5)
+    def _spin(self, executor: Executor, done: threading.Event) -> None:
+        try:
+            spin_until_shutdown(executor, None, self._stopped)
+        finally:
+            done.set()
 
-    def shutdown(self) -> None:
-        """Stop spinning and destroy the nodes."""
+    def wait(self) -> None:
+        """Block until the executors stop or the nodes' context shuts down.
+
+        Ctrl-C raises KeyboardInterrupt here.  SIGTERM (and a Ctrl-C whose
+        KeyboardInterrupt Python dropped in a ``__del__``) only shuts the context down:
+        rclpy's signal handler triggers the executors' guard conditions *before* it
+        shuts the contexts down, so an executor woken by that trigger sees its context
+        still up and waits again, and nothing wakes it after the shutdown (rclpy calls a
+        context's ``on_shutdown`` callbacks only when Python shuts it down).  Hence this
+        returns on the context's state, not on the threads alone; :meth:`shutdown` then
+        wakes and stops the executors.
+
+        It waits on events of its own, not in ``Thread.join`` (nor ``is_alive``): a
+        KeyboardInterrupt raised in there while the thread runs makes CPython 3.11
+        release the thread's own state lock and mark it stopped (the bpo-45274
+        handler), so that every later join returns at once with the executor still
+        spinning; the nodes were then destroyed under it, and the process aborted at
+        exit ("terminate called without an active exception") as that thread woke.
+        """
+        contexts = {executor.context for executor in self.executors}
+        while not all(done.is_set() for done in self.spun):
+            if not all(context.ok() for context in contexts):
+                return
+            next(done for done in self.spun if not done.is_set()).wait(0.2)
+
+    def shutdown(self, interrupted: bool = False) -> None:
+        """Stop spinning and destroy the nodes.
+
+        Parameters
+        ----------
+        interrupted : bool
+            Called on a KeyboardInterrupt (Ctrl-C): first wait until rclpy's signal
+            handler has shut the context down (:func:`~suspension_tuning.nodes._spin.
+            settle_signal`), as destroying an executor frees its guard conditions that
+            the handler's thread may still be triggering.
+        """
+        if interrupted:
+            settle_signal(self.executors[0].context if self.executors else None)
         self.stopped = True
         for executor in self.executors:
             executor.shutdown(timeout_sec=10.0)
-        for thread in self.threads:
-            thread.join(timeout=10.0)
+        deadline = time.monotonic() + 10.0
+        for done in self.spun:
+            done.wait(max(0.0, deadline - time.monotonic()))
         for node in reversed(self.nodes):
             node.destroy_node()
 
@@ -161,9 +205,16 @@ def main(argv: list[str] | None = None) -> None:
                         help='simulation workers in this process (0: only those found on the '
                              'graph, e.g. on other hosts)')
     parser.add_argument('--no-record', action='store_true', help='no recorder node')
+    parser.add_argument('--telemetry-rate', type=float, default=None, metavar='R',
+                        help="live telemetry: the workers' parameter telemetry_rate, a run's "
+                             'telemetry paced at its simulated time / R (1.0: as it happened); '
+                             '0, the default, publishes it at once (best for optimisation)')
     args = parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
     if args.workers < 0:
         parser.error(f'--workers cannot be negative, got {args.workers}')
+    if args.telemetry_rate is not None and not args.telemetry_rate >= 0.0:
+        parser.error(f'--telemetry-rate must be 0 (at once) or a positive rate factor, got '
+                     f'{args.telemetry_rate:g}')
     rclpy.init(args=argv)
     from suspension_tuning.nodes._unique import require_unique, start_check
     # One discovery window for every node of the graph, spent importing the nodes.
@@ -180,27 +231,33 @@ def main(argv: list[str] | None = None) -> None:
     if not require_unique('graph', check):
         return  # Ctrl-C or SIGTERM during the check: nothing was started
     try:
-        nodes = build_nodes(args.workers, not args.no_record)
+        live = ([] if args.telemetry_rate is None
+                else [Parameter('telemetry_rate', value=args.telemetry_rate)])
+        nodes = build_nodes(args.workers, not args.no_record,
+                            overrides={name: live for name in worker_names(args.workers)})
     except (FmuConfigError, MappingError, ParameterError) as error:
         # As the node alone says it (full_vehicle_sim's main): one line, exit code 2.
         rclpy.try_shutdown()
         print(f'{getattr(error, "node_name", "graph")}: not started: {error}', file=sys.stderr)
         sys.exit(2)
     except KeyboardInterrupt:  # Ctrl-C while the nodes are made: the ones made are gone
-        rclpy.try_shutdown()
+        settle_signal()
+        end_rclpy()
         return
     except Exception:
         if rclpy.ok():
             raise
+        end_rclpy()
         return  # SIGTERM while the nodes are made: a node on the shut-down context failed
     graph = SpinningGraph(nodes)
+    interrupted = False
     try:
         graph.wait()
     except KeyboardInterrupt:
-        pass
+        interrupted = True
     finally:
-        graph.shutdown()
-        rclpy.try_shutdown()
+        graph.shutdown(interrupted)
+        end_rclpy()
 
 
 if __name__ == '__main__':

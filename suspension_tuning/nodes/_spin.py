@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -63,6 +64,59 @@ def spin_until_shutdown(executor: Executor, until: Callable[[], bool] | None = N
             raise
 
 
+#: Longest wait for rclpy's signal handler to shut a context down after Ctrl-C, s.  Its
+#: thread does so within microseconds of the signal; seconds cover a loaded machine.
+SIGNAL_SETTLE_S = 5.0
+
+
+def settle_signal(context: Any = None, timeout_s: float = SIGNAL_SETTLE_S) -> None:
+    """After a KeyboardInterrupt: wait until rclpy's signal handler has shut ``context`` down.
+
+    rclpy handles SIGINT in two steps: its C handler calls Python's (which raises
+    KeyboardInterrupt in the main thread) and wakes a thread of its own, which then
+    triggers every executor's SIGINT guard condition through raw pointers and, after
+    that, shuts the contexts down.  An executor shut down (or garbage-collected) in
+    between unregisters and frees its guard condition while that thread may still
+    trigger it: a use after free, SIGSEGV in ``__rmw_trigger_guard_condition``
+    (rmw_fastrtps_shared_cpp).  Once the context is no longer ok, that thread is done
+    with the guard conditions, and executors can go.
+
+    Returns at once when rclpy's SIGINT handler is not installed (the interrupt came
+    from Python alone, nothing shuts the context down), and after ``timeout_s`` at most.
+
+    Parameters
+    ----------
+    context : rclpy.context.Context, optional
+        The context the handler shuts down (default: rclpy's default context).
+    timeout_s : float
+        Longest wait, s.
+    """
+    from rclpy.signals import SignalHandlerOptions, get_current_signal_handlers_options
+    from rclpy.utilities import get_default_context
+
+    options = get_current_signal_handlers_options()
+    if options not in (SignalHandlerOptions.SIGINT, SignalHandlerOptions.ALL):
+        return
+    context = context or get_default_context()
+    deadline = time.monotonic() + timeout_s
+    while context.ok() and time.monotonic() < deadline:
+        time.sleep(0.01)
+
+
+def end_rclpy() -> None:
+    """Shut rclpy's default context down and end its signal handler's thread.
+
+    ``rclpy.try_shutdown`` leaves rclpy's signal handling thread running; a process that
+    ends while that thread is still at work after a signal (it shuts the contexts down)
+    dies in Python's finalisation ("terminate called without an active exception",
+    SIGABRT).  Uninstalling the handlers joins the thread.
+    """
+    from rclpy.signals import uninstall_signal_handlers
+
+    rclpy.try_shutdown()
+    uninstall_signal_handlers()
+
+
 def wait_future(future: Any, timeout_s: float | None = None) -> Any:
     """Wait for an rclpy future completed by an executor in another thread.
 
@@ -113,13 +167,24 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
         print(f'not started: {error}', file=sys.stderr)
         sys.exit(2)
     except KeyboardInterrupt:  # Ctrl-C while the node is made
-        rclpy.try_shutdown()
+        settle_signal()
+        end_rclpy()
         return
-    executor = executor_for(node)
-    executor.add_node(node)
+    except Exception:
+        if rclpy.ok():
+            raise
+        end_rclpy()  # SIGTERM while the node is made: it failed on the shut-down context
+        return
+    # The node spins in a thread of its own, the main thread waits for Ctrl-C or for the
+    # context to shut down (SIGTERM), as in ``graph`` (graph.SpinningGraph has why).
+    from suspension_tuning.graph import SpinningGraph
+
+    spinning = SpinningGraph([node])
+    interrupted = False
     try:
-        spin_until_shutdown(executor)
+        spinning.wait()
+    except KeyboardInterrupt:
+        interrupted = True
     finally:
-        node.destroy_node()
-        executor.shutdown(timeout_sec=1.0)
-        rclpy.try_shutdown()
+        spinning.shutdown(interrupted)
+        end_rclpy()

@@ -50,7 +50,7 @@ from suspension_tuning_interfaces.msg import CalibrationProgress, IterationRecor
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning.evaluation import scenarios as evaluation_scenarios
-from suspension_tuning.nodes._parameters import declare_numbers
+from suspension_tuning.nodes._parameters import declare_numbers, read_only
 from suspension_tuning.nodes._pool import PoolEvent, pool_from_parameters
 from suspension_tuning.nodes._services import ServiceCallError, call
 from suspension_tuning.nodes._spin import run_node
@@ -220,6 +220,9 @@ class CoordinatorNode(Node):
         # (rcl's default 900 s).  Every status message carries every goal kept, and an
         # action client converts all of them each time (config/graph.yaml).
         declare_numbers(self, {'result_timeout_s': 10.0})
+        # Read once below; calibration_samples, fd_step and final_telemetry act when set.
+        read_only(self, ['gradient_node', 'call_timeout_s', 'optimiser_config',
+                         'optimiser_section', 'result_timeout_s'])
         self.timeout_s = float(self.get_parameter('call_timeout_s').value)
         self.stopping = False  # set by destroy_node: a running goal stops waiting
         clients = ReentrantCallbackGroup()
