@@ -19,20 +19,16 @@ from __future__ import annotations
 import argparse
 import functools
 import sys
-import threading
-import time
 from collections.abc import Callable, Mapping
 
 import rclpy
-from rclpy.executors import Executor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from suspension_tuning.nodes._spin import (
+    SpinningGraph,
     end_rclpy,
-    executor_for,
     settle_signal,
-    spin_until_shutdown,
 )
 
 
@@ -111,90 +107,6 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
                 node.destroy_node()
             raise
     return nodes
-
-
-class SpinningGraph:
-    """The graph's nodes spinning in background threads, one executor per node.
-
-    Each node gets the executor it asks for (``nodes._spin.executor_for``):
-    multi-threaded for the nodes whose callbacks wait for a response (coordinator,
-    gradient evaluator, simulation workers), single-threaded for the others.  One
-    executor per node keeps each wait set small, and a telemetry burst for the
-    recorder or the step-locked valve controller from waiting behind other nodes'
-    callbacks.  :meth:`shutdown` stops the executors, joins the threads and destroys
-    the nodes (the recorder finalises its bag).
-    """
-
-    def __init__(self, nodes: list[Node], extra: list[Node] = ()) -> None:
-        self.nodes = [*nodes, *extra]
-        self.stopped = False
-        self.executors: list[Executor] = []
-        for node in self.nodes:
-            executor = executor_for(node)
-            executor.add_node(node)
-            self.executors.append(executor)
-        #: Set when an executor's spin has returned (``wait`` has why not Thread.join).
-        self.spun = [threading.Event() for _ in self.executors]
-        self.threads = [threading.Thread(target=self._spin, args=(executor, done), daemon=True)
-                        for executor, done in zip(self.executors, self.spun)]
-        for thread in self.threads:
-            thread.start()
-
-    def _stopped(self) -> bool:
-        return self.stopped
-
-    def _spin(self, executor: Executor, done: threading.Event) -> None:
-        try:
-            spin_until_shutdown(executor, None, self._stopped)
-        finally:
-            done.set()
-
-    def wait(self) -> None:
-        """Block until the executors stop or the nodes' context shuts down.
-
-        Ctrl-C raises KeyboardInterrupt here.  SIGTERM (and a Ctrl-C whose
-        KeyboardInterrupt Python dropped in a ``__del__``) only shuts the context down:
-        rclpy's signal handler triggers the executors' guard conditions *before* it
-        shuts the contexts down, so an executor woken by that trigger sees its context
-        still up and waits again, and nothing wakes it after the shutdown (rclpy calls a
-        context's ``on_shutdown`` callbacks only when Python shuts it down).  Hence this
-        returns on the context's state, not on the threads alone; :meth:`shutdown` then
-        wakes and stops the executors.
-
-        It waits on events of its own, not in ``Thread.join`` (nor ``is_alive``): a
-        KeyboardInterrupt raised in there while the thread runs makes CPython 3.11
-        release the thread's own state lock and mark it stopped (the bpo-45274
-        handler), so that every later join returns at once with the executor still
-        spinning; the nodes were then destroyed under it, and the process aborted at
-        exit ("terminate called without an active exception") as that thread woke.
-        """
-        contexts = {executor.context for executor in self.executors}
-        while not all(done.is_set() for done in self.spun):
-            if not all(context.ok() for context in contexts):
-                return
-            next(done for done in self.spun if not done.is_set()).wait(0.2)
-
-    def shutdown(self, interrupted: bool = False) -> None:
-        """Stop spinning and destroy the nodes.
-
-        Parameters
-        ----------
-        interrupted : bool
-            Called on a KeyboardInterrupt (Ctrl-C): first wait until rclpy's signal
-            handler has shut the context down (:func:`~suspension_tuning.nodes._spin.
-            settle_signal`), as destroying an executor frees its guard conditions that
-            the handler's thread may still be triggering.
-        """
-        if interrupted:
-            settle_signal(self.executors[0].context if self.executors else None)
-        self.stopped = True
-        for executor in self.executors:
-            executor.shutdown(timeout_sec=10.0)
-        deadline = time.monotonic() + 10.0
-        for done in self.spun:
-            done.wait(max(0.0, deadline - time.monotonic()))
-        for node in reversed(self.nodes):
-            node.destroy_node()
 
 
 def main(argv: list[str] | None = None) -> None:
