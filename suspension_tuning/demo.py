@@ -140,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
         print('\ndemo: interrupted', file=sys.stderr)
         status = 130
     finally:
-        graph.shutdown()
+        graph.shutdown(interrupted=status == 130)
         rclpy.try_shutdown()
     print(f'\ndemo_wall_time_s: {time.perf_counter() - start:.1f}')
     return status

@@ -19,15 +19,17 @@ from __future__ import annotations
 import argparse
 import functools
 import sys
-import threading
 from collections.abc import Callable, Mapping
 
 import rclpy
-from rclpy.executors import Executor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from suspension_tuning.nodes._spin import executor_for, spin_until_shutdown
+from suspension_tuning.nodes._spin import (
+    SpinningGraph,
+    end_rclpy,
+    settle_signal,
+)
 
 
 def worker_names(workers: int) -> list[str]:
@@ -107,52 +109,6 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
     return nodes
 
 
-class SpinningGraph:
-    """The graph's nodes spinning in background threads, one executor per node.
-
-    Each node gets the executor it asks for (``nodes._spin.executor_for``):
-    multi-threaded for the nodes whose callbacks wait for a response (coordinator,
-    gradient evaluator, simulation workers), single-threaded for the others.  One
-    executor per node keeps each wait set small, and a telemetry burst for the
-    recorder or the step-locked valve controller from waiting behind other nodes'
-    callbacks.  :meth:`shutdown` stops the executors, joins the threads and destroys
-    the nodes (the recorder finalises its bag).
-    """
-
-    def __init__(self, nodes: list[Node], extra: list[Node] = ()) -> None:
-        self.nodes = [*nodes, *extra]
-        self.stopped = False
-        self.executors: list[Executor] = []
-        for node in self.nodes:
-            executor = executor_for(node)
-            executor.add_node(node)
-            self.executors.append(executor)
-        self.threads = [threading.Thread(target=spin_until_shutdown,
-                                         args=(executor, None, self._stopped), daemon=True)
-                        for executor in self.executors]
-        for thread in self.threads:
-            thread.start()
-
-    def _stopped(self) -> bool:
-        return self.stopped
-
-    def wait(self) -> None:
-        """Block until the executors stop (Ctrl-C raises KeyboardInterrupt here)."""
-        for thread in self.threads:
-            while thread.is_alive():
-                thread.join(timeout=0.5)
-
-    def shutdown(self) -> None:
-        """Stop spinning and destroy the nodes."""
-        self.stopped = True
-        for executor in self.executors:
-            executor.shutdown(timeout_sec=10.0)
-        for thread in self.threads:
-            thread.join(timeout=10.0)
-        for node in reversed(self.nodes):
-            node.destroy_node()
-
-
 def main(argv: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning graph``."""
     argv = sys.argv if argv is None else ['graph', *argv]
@@ -161,9 +117,16 @@ def main(argv: list[str] | None = None) -> None:
                         help='simulation workers in this process (0: only those found on the '
                              'graph, e.g. on other hosts)')
     parser.add_argument('--no-record', action='store_true', help='no recorder node')
+    parser.add_argument('--telemetry-rate', type=float, default=None, metavar='R',
+                        help="live telemetry: the workers' parameter telemetry_rate, a run's "
+                             'telemetry paced at its simulated time / R (1.0: as it happened); '
+                             '0, the default, publishes it at once (best for optimisation)')
     args = parser.parse_args(rclpy.utilities.remove_ros_args(argv)[1:])
     if args.workers < 0:
         parser.error(f'--workers cannot be negative, got {args.workers}')
+    if args.telemetry_rate is not None and not args.telemetry_rate >= 0.0:
+        parser.error(f'--telemetry-rate must be 0 (at once) or a positive rate factor, got '
+                     f'{args.telemetry_rate:g}')
     rclpy.init(args=argv)
     from suspension_tuning.nodes._unique import require_unique, start_check
     # One discovery window for every node of the graph, spent importing the nodes.
@@ -180,27 +143,33 @@ def main(argv: list[str] | None = None) -> None:
     if not require_unique('graph', check):
         return  # Ctrl-C or SIGTERM during the check: nothing was started
     try:
-        nodes = build_nodes(args.workers, not args.no_record)
+        live = ([] if args.telemetry_rate is None
+                else [Parameter('telemetry_rate', value=args.telemetry_rate)])
+        nodes = build_nodes(args.workers, not args.no_record,
+                            overrides={name: live for name in worker_names(args.workers)})
     except (FmuConfigError, MappingError, ParameterError) as error:
         # As the node alone says it (full_vehicle_sim's main): one line, exit code 2.
         rclpy.try_shutdown()
         print(f'{getattr(error, "node_name", "graph")}: not started: {error}', file=sys.stderr)
         sys.exit(2)
     except KeyboardInterrupt:  # Ctrl-C while the nodes are made: the ones made are gone
-        rclpy.try_shutdown()
+        settle_signal()
+        end_rclpy()
         return
     except Exception:
         if rclpy.ok():
             raise
+        end_rclpy()
         return  # SIGTERM while the nodes are made: a node on the shut-down context failed
     graph = SpinningGraph(nodes)
+    interrupted = False
     try:
         graph.wait()
     except KeyboardInterrupt:
-        pass
+        interrupted = True
     finally:
-        graph.shutdown()
-        rclpy.try_shutdown()
+        graph.shutdown(interrupted)
+        end_rclpy()
 
 
 if __name__ == '__main__':

@@ -6,7 +6,8 @@
   counts, start time and duration;
 * the run's configuration (the ``run_config`` metadata record);
 * the optimisation, if ``/optimisation/progress`` (IterationRecord) and/or
-  ``/optimisation/result`` (Optimise_Result) are present: the iteration table
+  ``/optimisation/result`` (OptimisationResult; Optimise_Result in older bags) are
+  present: the iteration table
   (iteration, f, largest violation, move limit, full and simplified runs, x), the
   reported design (x, f, g, physical values): the best feasible iterate with its
   iteration, or, saying so plainly, the least violating one when none was feasible

@@ -98,14 +98,17 @@ def test_wrong_length_for_to_physical_raises():
 
 @pytest.mark.parametrize('bad', [np.nan, np.inf, -np.inf])
 def test_non_finite_raises_naming_index(bad):
-    with pytest.raises(ValueError, match=r'x\[1\].*not finite'):
+    with pytest.raises(ValueError, match=r'x\[1\].*not finite') as refusal:
         validate_design([0.5, bad], 2)
+    # The number as a person reads it ('nan', 'inf'), not numpy's repr.
+    assert str(refusal.value).endswith(f': {float(bad)}') and 'np.' not in str(refusal.value)
 
 
 @pytest.mark.parametrize('value', [0.0, 0.0009, 1.0000001, -1.0, 2.0])
 def test_out_of_bounds_raises_naming_index_and_value(value):
-    with pytest.raises(ValueError, match=r'x\[2\].*outside the bounds'):
+    with pytest.raises(ValueError, match=r'x\[2\].*outside the bounds') as refusal:
         validate_design([0.5, 0.5, value, 0.5], 4)
+    assert f'= {float(value)} is outside' in str(refusal.value)
 
 
 def test_bad_n_vars_raises():

@@ -34,9 +34,18 @@ def test_sim_node_integrator_from_request_or_parameter(ros_context, executor):
     assert by_field.f[0] == local.f[0]  # same bits through the graph
     default = call(client, EvaluateDesign.Request(scenario='ride', n_vars=2, designs=designs))
     assert default.f[0] == evaluation.evaluate('ride', np.array([designs])).f[0]
-    sim.set_parameters([Parameter('integrator', value='variable_step')])
-    by_parameter = call(client, EvaluateDesign.Request(scenario='ride', n_vars=2,
-                                                       designs=designs))
+    # The parameter is read once at start-up (it names the model the worker announces):
+    # set at run time it is refused, given at start-up it is the default of every request.
+    refused = sim.set_parameters([Parameter('integrator', value='variable_step')])[0]
+    assert not refused.successful and 'read-only' in refused.reason
+    by_parameter_sim = FullVehicleSimNode(
+        'integrator_sim_variable', context=ros_context,
+        parameter_overrides=[Parameter('integrator', value='variable_step')])
+    executor.add(by_parameter_sim)
+    by_parameter_client = client_node.create_client(EvaluateDesign,
+                                                    '/integrator_sim_variable/evaluate')
+    by_parameter = call(by_parameter_client, EvaluateDesign.Request(scenario='ride', n_vars=2,
+                                                                    designs=designs))
     assert by_parameter.f[0] == local.f[0]
     bad = call(client, EvaluateDesign.Request(scenario='ride', n_vars=2, designs=designs,
                                               integrator='euler'))

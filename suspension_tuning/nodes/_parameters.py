@@ -86,3 +86,35 @@ def declare_numbers(node: Node, defaults: Mapping[str, float | int]) -> None:
 
     node.add_pre_set_parameters_callback(convert)
     node.add_on_set_parameters_callback(check)
+
+
+def read_only(node: Node, names: list[str]) -> None:
+    """Mark declared parameters of ``node`` read-only: they take effect at start-up only.
+
+    Their values still come from ``--params-file`` or ``-p`` at start; ``ros2 param set``
+    is then refused ("Trying to set a read-only parameter"), instead of being accepted
+    without effect.  ``ros2 param describe`` shows the flag.
+    """
+    for name in names:
+        old = node.describe_parameter(name)  # the node's own object: not to be changed
+        node.set_descriptor(name, ParameterDescriptor(
+            type=old.type, description=old.description,
+            additional_constraints=old.additional_constraints, read_only=True,
+            dynamic_typing=old.dynamic_typing, floating_point_range=old.floating_point_range,
+            integer_range=old.integer_range))
+
+
+def declare_string_array(node: Node, name: str) -> list[str]:
+    """Declare a string-array parameter whose default is the empty array; its value.
+
+    rclpy infers a parameter's type from its default, and an empty list has none (it
+    reads as a byte array), while a parameter declared with a type and no value is
+    uninitialised: rclpy's ``get_parameters`` service then answers a request naming it
+    with nothing at all (``ros2 param get``: "Parameter not set", ``ros2 param dump``:
+    an empty node).  So the parameter is declared by type and then set to ``[]``
+    unless an override gave it a value.
+    """
+    parameter = node.declare_parameter(name, Parameter.Type.STRING_ARRAY)
+    if parameter.type_ == Parameter.Type.NOT_SET:
+        node.set_parameters([Parameter(name, Parameter.Type.STRING_ARRAY, [])])
+    return list(node.get_parameter(name).value)

@@ -579,24 +579,31 @@ class SimulationPool:
                     'to another worker', worker.name)
 
 
+#: The pool's parameters on the coordinator and the gradient evaluator (start-up only).
+POOL_PARAMETERS = ['sim_workers', 'sim_worker_pattern', 'design_timeout_s',
+                   'worker_loss_timeout_s', 'pieces_per_worker']
+
+
 def pool_from_parameters(node: Node, group: CallbackGroup,
                          stopping: Callable[[], bool] = lambda: False,
                          on_event: Callable[[PoolEvent], None] | None = None) -> SimulationPool:
     """Declare the pool's ROS parameters on ``node`` and make its pool from them.
 
-    ``sim_workers`` (string array, optional allow-list), ``sim_worker_pattern``
+    ``sim_workers`` (string array, optional allow-list; empty: none), ``sim_worker_pattern``
     ('' = the node's namespace), ``design_timeout_s`` (s), ``worker_loss_timeout_s``
     (s) and ``pieces_per_worker``: config/graph.yaml has their meaning and defaults.
     """
-    from rclpy.parameter import Parameter
+    from suspension_tuning.nodes._parameters import (
+        declare_numbers,
+        declare_string_array,
+        read_only,
+    )
 
-    from suspension_tuning.nodes._parameters import declare_numbers
-
-    # No default: an unset allow-list is uninitialised (get_parameter would raise).
-    allow = node.declare_parameter('sim_workers', Parameter.Type.STRING_ARRAY).value
+    allow = declare_string_array(node, 'sim_workers')  # [] (the default): every worker
     node.declare_parameter('sim_worker_pattern', '')
     declare_numbers(node, {'design_timeout_s': 360.0, 'worker_loss_timeout_s': 2.0,
                            'pieces_per_worker': 3})
+    read_only(node, POOL_PARAMETERS)  # the pool below is made from them once
     value = node.get_parameter
     return SimulationPool(node, group, allow=list(allow or ()),
                           pattern=str(value('sim_worker_pattern').value),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -63,6 +64,59 @@ def spin_until_shutdown(executor: Executor, until: Callable[[], bool] | None = N
             raise
 
 
+#: Longest wait for rclpy's signal handler to shut a context down after Ctrl-C, s.  Its
+#: thread does so within microseconds of the signal; seconds cover a loaded machine.
+SIGNAL_SETTLE_S = 5.0
+
+
+def settle_signal(context: Any = None, timeout_s: float = SIGNAL_SETTLE_S) -> None:
+    """After a KeyboardInterrupt: wait until rclpy's signal handler has shut ``context`` down.
+
+    rclpy handles SIGINT in two steps: its C handler calls Python's (which raises
+    KeyboardInterrupt in the main thread) and wakes a thread of its own, which then
+    triggers every executor's SIGINT guard condition through raw pointers and, after
+    that, shuts the contexts down.  An executor shut down (or garbage-collected) in
+    between unregisters and frees its guard condition while that thread may still
+    trigger it: a use after free, SIGSEGV in ``__rmw_trigger_guard_condition``
+    (rmw_fastrtps_shared_cpp).  Once the context is no longer ok, that thread is done
+    with the guard conditions, and executors can go.
+
+    Returns at once when rclpy's SIGINT handler is not installed (the interrupt came
+    from Python alone, nothing shuts the context down), and after ``timeout_s`` at most.
+
+    Parameters
+    ----------
+    context : rclpy.context.Context, optional
+        The context the handler shuts down (default: rclpy's default context).
+    timeout_s : float
+        Longest wait, s.
+    """
+    from rclpy.signals import SignalHandlerOptions, get_current_signal_handlers_options
+    from rclpy.utilities import get_default_context
+
+    options = get_current_signal_handlers_options()
+    if options not in (SignalHandlerOptions.SIGINT, SignalHandlerOptions.ALL):
+        return
+    context = context or get_default_context()
+    deadline = time.monotonic() + timeout_s
+    while context.ok() and time.monotonic() < deadline:
+        time.sleep(0.01)
+
+
+def end_rclpy() -> None:
+    """Shut rclpy's default context down and end its signal handler's thread.
+
+    ``rclpy.try_shutdown`` leaves rclpy's signal handling thread running; a process that
+    ends while that thread is still at work after a signal (it shuts the contexts down)
+    dies in Python's finalisation ("terminate called without an active exception",
+    SIGABRT).  Uninstalling the handlers joins the thread.
+    """
+    from rclpy.signals import uninstall_signal_handlers
+
+    rclpy.try_shutdown()
+    uninstall_signal_handlers()
+
+
 def wait_future(future: Any, timeout_s: float | None = None) -> Any:
     """Wait for an rclpy future completed by an executor in another thread.
 
@@ -76,6 +130,90 @@ def wait_future(future: Any, timeout_s: float | None = None) -> Any:
     if not done.wait(timeout_s):
         raise TimeoutError(f'no answer within {timeout_s} s')
     return future.result()
+
+
+class SpinningGraph:
+    """The graph's nodes spinning in background threads, one executor per node.
+
+    Each node gets the executor it asks for (``nodes._spin.executor_for``):
+    multi-threaded for the nodes whose callbacks wait for a response (coordinator,
+    gradient evaluator, simulation workers), single-threaded for the others.  One
+    executor per node keeps each wait set small, and a telemetry burst for the
+    recorder or the step-locked valve controller from waiting behind other nodes'
+    callbacks.  :meth:`shutdown` stops the executors, joins the threads and destroys
+    the nodes (the recorder finalises its bag).
+    """
+
+    def __init__(self, nodes: list[Node], extra: list[Node] = ()) -> None:
+        self.nodes = [*nodes, *extra]
+        self.stopped = False
+        self.executors: list[Executor] = []
+        for node in self.nodes:
+            executor = executor_for(node)
+            executor.add_node(node)
+            self.executors.append(executor)
+        #: Set when an executor's spin has returned (``wait`` has why not Thread.join).
+        self.spun = [threading.Event() for _ in self.executors]
+        self.threads = [threading.Thread(target=self._spin, args=(executor, done), daemon=True)
+                        for executor, done in zip(self.executors, self.spun)]
+        for thread in self.threads:
+            thread.start()
+
+    def _stopped(self) -> bool:
+        return self.stopped
+
+    def _spin(self, executor: Executor, done: threading.Event) -> None:
+        try:
+            spin_until_shutdown(executor, None, self._stopped)
+        finally:
+            done.set()
+
+    def wait(self) -> None:
+        """Block until the executors stop or the nodes' context shuts down.
+
+        Ctrl-C raises KeyboardInterrupt here.  SIGTERM (and a Ctrl-C whose
+        KeyboardInterrupt Python dropped in a ``__del__``) only shuts the context down:
+        rclpy's signal handler triggers the executors' guard conditions *before* it
+        shuts the contexts down, so an executor woken by that trigger sees its context
+        still up and waits again, and nothing wakes it after the shutdown (rclpy calls a
+        context's ``on_shutdown`` callbacks only when Python shuts it down).  Hence this
+        returns on the context's state, not on the threads alone; :meth:`shutdown` then
+        wakes and stops the executors.
+
+        It waits on events of its own, not in ``Thread.join`` (nor ``is_alive``): a
+        KeyboardInterrupt raised in there while the thread runs makes CPython 3.11
+        release the thread's own state lock and mark it stopped (the bpo-45274
+        handler), so that every later join returns at once with the executor still
+        spinning; the nodes were then destroyed under it, and the process aborted at
+        exit ("terminate called without an active exception") as that thread woke.
+        """
+        contexts = {executor.context for executor in self.executors}
+        while not all(done.is_set() for done in self.spun):
+            if not all(context.ok() for context in contexts):
+                return
+            next(done for done in self.spun if not done.is_set()).wait(0.2)
+
+    def shutdown(self, interrupted: bool = False) -> None:
+        """Stop spinning and destroy the nodes.
+
+        Parameters
+        ----------
+        interrupted : bool
+            Called on a KeyboardInterrupt (Ctrl-C): first wait until rclpy's signal
+            handler has shut the context down (:func:`~suspension_tuning.nodes._spin.
+            settle_signal`), as destroying an executor frees its guard conditions that
+            the handler's thread may still be triggering.
+        """
+        if interrupted:
+            settle_signal(self.executors[0].context if self.executors else None)
+        self.stopped = True
+        for executor in self.executors:
+            executor.shutdown(timeout_sec=10.0)
+        deadline = time.monotonic() + 10.0
+        for done in self.spun:
+            done.wait(max(0.0, deadline - time.monotonic()))
+        for node in reversed(self.nodes):
+            node.destroy_node()
 
 
 def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
@@ -113,13 +251,22 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
         print(f'not started: {error}', file=sys.stderr)
         sys.exit(2)
     except KeyboardInterrupt:  # Ctrl-C while the node is made
-        rclpy.try_shutdown()
+        settle_signal()
+        end_rclpy()
         return
-    executor = executor_for(node)
-    executor.add_node(node)
+    except Exception:
+        if rclpy.ok():
+            raise
+        end_rclpy()  # SIGTERM while the node is made: it failed on the shut-down context
+        return
+    # The node spins in a thread of its own, the main thread waits for Ctrl-C or for the
+    # context to shut down (SIGTERM), as in ``graph`` (SpinningGraph has why).
+    spinning = SpinningGraph([node])
+    interrupted = False
     try:
-        spin_until_shutdown(executor)
+        spinning.wait()
+    except KeyboardInterrupt:
+        interrupted = True
     finally:
-        node.destroy_node()
-        executor.shutdown(timeout_sec=1.0)
-        rclpy.try_shutdown()
+        spinning.shutdown(interrupted)
+        end_rclpy()

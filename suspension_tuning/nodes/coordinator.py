@@ -46,11 +46,16 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 from suspension_tuning_interfaces.action import Optimise
-from suspension_tuning_interfaces.msg import CalibrationProgress, IterationRecord, TimeHistories
+from suspension_tuning_interfaces.msg import (
+    CalibrationProgress,
+    IterationRecord,
+    OptimisationResult,
+    TimeHistories,
+)
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning.evaluation import scenarios as evaluation_scenarios
-from suspension_tuning.nodes._parameters import declare_numbers
+from suspension_tuning.nodes._parameters import declare_numbers, read_only
 from suspension_tuning.nodes._pool import PoolEvent, pool_from_parameters
 from suspension_tuning.nodes._services import ServiceCallError, call
 from suspension_tuning.nodes._spin import run_node
@@ -170,6 +175,17 @@ def action_result(result: Any, history: list[IterationRecord], t0: float,
     return message
 
 
+def result_topic_message(result: Optimise.Result) -> OptimisationResult:
+    """The action result as the message of ``/optimisation/result``, field for field.
+
+    The topic has a message type of its own: an action's inner ``Optimise_Result`` is
+    no message type that ``ros2 topic echo`` or Foxglove can resolve.  Bags recorded
+    with that type stay readable (inspect_bag decodes with the definition in the bag).
+    """
+    return OptimisationResult(**{name: getattr(result, name)
+                                 for name in OptimisationResult.get_fields_and_field_types()})
+
+
 def set_metrics(message: Optimise.Result, scenario: str,
                 reported: dict[str, float] | None = None,
                 baseline: dict[str, float] | None = None) -> None:
@@ -220,6 +236,9 @@ class CoordinatorNode(Node):
         # (rcl's default 900 s).  Every status message carries every goal kept, and an
         # action client converts all of them each time (config/graph.yaml).
         declare_numbers(self, {'result_timeout_s': 10.0})
+        # Read once below; calibration_samples, fd_step and final_telemetry act when set.
+        read_only(self, ['gradient_node', 'call_timeout_s', 'optimiser_config',
+                         'optimiser_section', 'result_timeout_s'])
         self.timeout_s = float(self.get_parameter('call_timeout_s').value)
         self.stopping = False  # set by destroy_node: a running goal stops waiting
         clients = ReentrantCallbackGroup()
@@ -252,7 +271,7 @@ class CoordinatorNode(Node):
         self.progress_pub = self.create_publisher(IterationRecord, '/optimisation/progress',
                                                   RELIABLE)
         self.config_pub = self.create_publisher(String, '/optimisation/run_config', LATCHED)
-        self.result_pub = self.create_publisher(Optimise.Result, '/optimisation/result',
+        self.result_pub = self.create_publisher(OptimisationResult, '/optimisation/result',
                                                 LATCHED)
         # Dumped once (29 ms): the configuration files do not change while the node runs.
         self.static_config_yaml = configuration_yaml()
@@ -552,7 +571,7 @@ class CoordinatorNode(Node):
             message = Optimise.Result(success=False, message=f'evaluation failed: {error}',
                                       model_fingerprint=fingerprint,
                                       wall_time_s=time.monotonic() - t0)
-            self.result_pub.publish(message)
+            self.result_pub.publish(result_topic_message(message))
             return message
         g = np.asarray(response.g, float)
         violation = float(max(0.0, g.max())) if g.size else 0.0
@@ -574,7 +593,7 @@ class CoordinatorNode(Node):
         set_metrics(message, goal.scenario, reported=physical_metrics(
             goal.scenario, response.metric_names, response.metrics))
         goal_handle.succeed()
-        self.result_pub.publish(message)
+        self.result_pub.publish(result_topic_message(message))
         return message
 
     def _optimise(self, goal_handle) -> Optimise.Result:
@@ -600,7 +619,7 @@ class CoordinatorNode(Node):
             self.get_logger().error(f'optimisation refused: {refusal}')
             goal_handle.abort()
             message = Optimise.Result(success=False, message=f'refused: {refusal}')
-            self.result_pub.publish(message)
+            self.result_pub.publish(result_topic_message(message))
             return message
         self.get_logger().info(f'optimising {request.scenario} with {request.n_vars} '
                                f'variables, {request.gradient_source} gradients, model '
@@ -641,7 +660,7 @@ class CoordinatorNode(Node):
             message = Optimise.Result(success=False, message=text, history=history_msgs,
                                       wall_time_s=time.monotonic() - t0,
                                       model_fingerprint=fingerprint, **counter.as_dict())
-            self.result_pub.publish(message)
+            self.result_pub.publish(result_topic_message(message))
             return message
         message = action_result(result, history_msgs, t0, counter)
         message.model_fingerprint = fingerprint
@@ -668,7 +687,7 @@ class CoordinatorNode(Node):
             message.message = 'cancelled' if design is None else f'cancelled; {design.statement}'
         else:
             goal_handle.succeed()
-        self.result_pub.publish(message)
+        self.result_pub.publish(result_topic_message(message))
         return message
 
     def _stopped(self) -> bool:

@@ -78,7 +78,7 @@ from suspension_tuning.fmu import FmuConfigError, MappingError, worker_model
 from suspension_tuning.fmu.fmi_log import FmuMessage
 from suspension_tuning.fmu.isolated import DEFAULT_TIMEOUT_S, FmuRunCancelledError
 from suspension_tuning.model_identity import builtin_description, summary_line
-from suspension_tuning.nodes._parameters import ParameterError, declare_numbers
+from suspension_tuning.nodes._parameters import ParameterError, declare_numbers, read_only
 from suspension_tuning.nodes._pool import model_qos
 from suspension_tuning.nodes._services import serve
 from suspension_tuning.nodes._spin import run_node
@@ -170,7 +170,12 @@ class FullVehicleSimNode(Node):
             declare_numbers(self, {'telemetry_decimation': 2, 'closed_loop_timeout_s': 5.0,
                                    'fmu_timeout_s': DEFAULT_TIMEOUT_S, 'fmu_processes': 1,
                                    'liveliness_lease_s': 0.5,
-                                   'max_designs_per_request': MAX_DESIGNS_PER_REQUEST})
+                                   'max_designs_per_request': MAX_DESIGNS_PER_REQUEST,
+                                   'telemetry_rate': 0.0})
+            # Read once at start-up (the model, its fingerprint, the liveliness QoS).
+            read_only(self, ['model', 'fmu_path', 'fmu_mapping', 'plausibility_check',
+                             'fmu_isolation', 'integrator', 'fmu_timeout_s', 'fmu_processes',
+                             'liveliness_lease_s'])
             param = self.get_parameter
             self.fmu = worker_model(
                 *(str(param(name).value) for name in ('model', 'fmu_path', 'fmu_mapping')),
@@ -343,11 +348,38 @@ class FullVehicleSimNode(Node):
         super().destroy_node()
 
     def publish_telemetry(self, histories: dict[str, np.ndarray], index: int = 0) -> None:
-        """Publish the time histories of design ``index`` on the telemetry topics."""
+        """Publish the time histories of design ``index`` on the telemetry topics.
+
+        Parameter ``telemetry_rate`` 0 (the default) publishes them at once, as fast as
+        the transport takes them: the run's response, and so the optimisation, waits for
+        nothing, and the recorder gets every message all the same.  A rate factor r > 0
+        paces them at their simulated time divided by r (1.0: as the run happened, at
+        the history rate over ``telemetry_decimation``), so that live tools (``ros2 topic
+        hz``, a live plot, Foxglove's live connection) see the run as it happens; the
+        run's response then comes after its simulated duration / r.  Pacing stops when
+        the context shuts down.
+        """
         step = max(1, int(self.get_parameter('telemetry_decimation').value))
-        for name, messages in telemetry_messages(histories, index, step).items():
-            for message in messages:
-                self.pub[name].publish(message)
+        rate = float(self.get_parameter('telemetry_rate').value)
+        per_topic = telemetry_messages(histories, index, step)
+        if not rate > 0.0:
+            for name, messages in per_topic.items():
+                for message in messages:
+                    self.pub[name].publish(message)
+            return
+        timeline = sorted(
+            ((m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec, name, m)
+             for name, messages in per_topic.items() for m in messages), key=lambda e: e[:2])
+        if not timeline:
+            return
+        start, t0 = time.monotonic(), timeline[0][0]
+        for t_s, name, message in timeline:
+            delay = start + (t_s - t0) / rate - time.monotonic()
+            if delay > 0.0:
+                time.sleep(delay)
+            if not self.context.ok():
+                return
+            self.pub[name].publish(message)
 
 
 def main(args: list[str] | None = None) -> None:

@@ -38,7 +38,7 @@ from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning import simplified_inputs
 from suspension_tuning.model_identity import ModelMismatchError
-from suspension_tuning.nodes._parameters import declare_numbers
+from suspension_tuning.nodes._parameters import declare_numbers, read_only
 from suspension_tuning.nodes._pool import pool_from_parameters
 from suspension_tuning.nodes._services import ServiceCallError, serve
 from suspension_tuning.nodes._spin import run_node
@@ -69,6 +69,7 @@ class GradientEvaluatorNode(Node):
         super().__init__('gradient_evaluator', **kwargs)
         self.declare_parameter('calibration_dir', '')
         declare_numbers(self, {'default_samples': 16, 'default_step': 0.025})
+        read_only(self, ['calibration_dir'])  # the defaults act when set
         directory = str(self.get_parameter('calibration_dir').value)
         self.calibration_dir = Path(directory or Path.home() / '.cache' / 'suspension_tuning'
                                     / 'calibration')

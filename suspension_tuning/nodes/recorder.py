@@ -43,7 +43,7 @@ from suspension_tuning.bag.definitions import (
 )
 from suspension_tuning.bag.recorder import RecordingSession
 from suspension_tuning.bag.writer import qos_profile_dict
-from suspension_tuning.nodes._parameters import declare_numbers
+from suspension_tuning.nodes._parameters import declare_numbers, read_only
 from suspension_tuning.nodes._spin import run_node
 
 #: Depth of the recorder's subscriptions: deep enough that a burst of telemetry (a 20 s
@@ -112,6 +112,10 @@ class RecorderNode(Node):
         declare_numbers(self, {'discovery_period_s': 0.5, 'chunk_size_bytes': 512 * 1024,
                                'max_chunk_interval_s': 1.0, 'pre_run_s': 1.0,
                                'post_run_s': 3.0})
+        # Every one read once, here and just below.
+        read_only(self, ['output_dir', 'bag_name', 'per_run', 'topics', 'exclude_regex',
+                         'discovery_period_s', 'chunk_size_bytes', 'max_chunk_interval_s',
+                         'pre_run_s', 'post_run_s'])
         param = self.get_parameter
         self.only = {t for t in param('topics').value if t}
         pattern = param('exclude_regex').value

@@ -33,7 +33,7 @@ from rosgraph_msgs.msg import Clock
 from suspension_tuning.bag.definitions import DefinitionNotFoundError, message_class
 from suspension_tuning.bag.reader import BagContents, read_messages
 from suspension_tuning.nodes._parameters import declare_numbers
-from suspension_tuning.nodes._spin import spin_until_shutdown
+from suspension_tuning.nodes._spin import settle_signal, spin_until_shutdown
 
 #: Depth used when the bag records no offered QoS (rosbag2's Rosbag2QoS default, keep
 #: last 10, reliable, volatile: jazzy rosbag2_transport qos.hpp).
@@ -201,6 +201,8 @@ def main(args: list[str] | None = None) -> None:
     except KeyboardInterrupt:  # Ctrl-C during that last wait
         pass
     finally:
+        if not node.done.is_set():  # Ctrl-C or SIGTERM (_spin.settle_signal has why)
+            settle_signal(executor.context)
         node.destroy_node()
         executor.shutdown(timeout_sec=1.0)
         rclpy.try_shutdown()

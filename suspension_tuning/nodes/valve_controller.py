@@ -19,7 +19,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from suspension_tuning_interfaces.msg import ValveState, VehicleState
 
-from suspension_tuning.nodes._parameters import declare_numbers
+from suspension_tuning.nodes._parameters import declare_numbers, read_only
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.vehicle.valve_logic import ValveController, ValveControllerParams
 
@@ -45,6 +45,7 @@ class ValveControllerNode(Node):
         defaults = asdict(ValveControllerParams())
         declare_numbers(self, {field.name: float(defaults[field.name])
                                for field in fields(ValveControllerParams)})
+        read_only(self, [f.name for f in fields(ValveControllerParams)])  # read once here
         params = ValveControllerParams.from_dict(
             {f.name: self.get_parameter(f.name).value for f in fields(ValveControllerParams)})
         self.controller = ValveController(params)

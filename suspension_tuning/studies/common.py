@@ -759,12 +759,12 @@ def write_bag(path: Path, run: StudyRun, recorder: Recorder) -> Path:
     """Record one run as a rosbag2-style bag, as the graph's recorder would.
 
     Topics ``/optimisation/run_config`` (std_msgs/String, YAML), ``/optimisation/progress``
-    (IterationRecord per iteration) and ``/optimisation/result`` (Optimise_Result); the
+    (IterationRecord per iteration) and ``/optimisation/result`` (OptimisationResult); the
     run_config YAML is also the bag's ``run_config`` metadata record.
     """
     from rclpy.serialization import serialize_message
     from std_msgs.msg import String
-    from suspension_tuning_interfaces.action import Optimise
+    from suspension_tuning_interfaces.msg import OptimisationResult
 
     from suspension_tuning.bag.recorder import run_config_metadata
     from suspension_tuning.bag.writer import BagWriter, qos_profile_dict
@@ -783,7 +783,7 @@ def write_bag(path: Path, run: StudyRun, recorder: Recorder) -> Path:
         best_iteration = next((h['iteration'] for h in reversed(run.history)
                                if h['x'] == run.x), max(len(run.history) - 1, 0))
         feasible, message = run.max_violation <= gtol, run.message
-    result = Optimise.Result(
+    result = OptimisationResult(
         success=run.success,
         message=message,
         x=list(run.x),
@@ -814,7 +814,7 @@ def write_bag(path: Path, run: StudyRun, recorder: Recorder) -> Path:
         )
         bag.add_topic(
             '/optimisation/result',
-            'suspension_tuning_interfaces/action/Optimise_Result',
+            'suspension_tuning_interfaces/msg/OptimisationResult',
             [latched],
         )
         bag.write('/optimisation/run_config', serialize_message(String(data=text)), first - 1)

@@ -561,12 +561,13 @@ def validate_design(x: np.ndarray, n_vars: int) -> np.ndarray:
     bad = ~np.isfinite(arr)
     if bad.any():
         b, i = np.argwhere(bad)[0]
-        raise ValueError(f'design {b}: variable x[{i}] ({names[i]}) is not finite: {arr[b, i]!r}')
+        raise ValueError(f'design {b}: variable x[{i}] ({names[i]}) is not finite: '
+                         f'{float(arr[b, i])}')
     out = (arr < X_LOWER) | (arr > X_UPPER)
     if out.any():
         b, i = np.argwhere(out)[0]
         raise ValueError(
-            f'design {b}: variable x[{i}] ({names[i]}) = {arr[b, i]!r} is outside the '
+            f'design {b}: variable x[{i}] ({names[i]}) = {float(arr[b, i])} is outside the '
             f'bounds [{X_LOWER}, {X_UPPER}] (paper eqs. 6, 8)'
         )
     return arr
@@ -607,7 +608,7 @@ def _check_physical(name: str, value: np.ndarray, low: float, high: float,
     bad = ~np.isfinite(arr)
     if bad.any():
         i = int(np.argmax(bad))
-        raise ValueError(f'{name}[{i}] is not finite: {arr[i]!r}')
+        raise ValueError(f'{name}[{i}] is not finite: {float(arr[i])}')
     out = (arr < low) | (arr > high)
     if out.any():
         i = int(np.argmax(out))
