@@ -168,6 +168,7 @@ def main(argv: list[str] | None = None) -> None:
     from suspension_tuning.nodes._unique import require_unique, start_check
     # One discovery window for every node of the graph, spent importing the nodes.
     check = start_check('graph', node_names(args.workers, not args.no_record))
+    from suspension_tuning.config_check import ConfigError
     from suspension_tuning.fmu import FmuConfigError, MappingError
     from suspension_tuning.nodes import (  # noqa: F401 - imported during the window
         coordinator,
@@ -181,7 +182,7 @@ def main(argv: list[str] | None = None) -> None:
         return  # Ctrl-C or SIGTERM during the check: nothing was started
     try:
         nodes = build_nodes(args.workers, not args.no_record)
-    except (FmuConfigError, MappingError, ParameterError) as error:
+    except (FmuConfigError, MappingError, ParameterError, ConfigError) as error:
         # As the node alone says it (full_vehicle_sim's main): one line, exit code 2.
         rclpy.try_shutdown()
         print(f'{getattr(error, "node_name", "graph")}: not started: {error}', file=sys.stderr)

@@ -98,8 +98,10 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
         The refusal also suggests another node name (a simulation worker).
 
     A parameter value the node cannot use (:class:`~suspension_tuning.nodes._parameters.
-    ParameterError`) ends the process with its one-line message and exit code 2.
+    ParameterError`) or a configuration file it cannot use (:class:`~suspension_tuning.
+    config_check.ConfigError`) ends the process with its one-line message and exit code 2.
     """
+    from suspension_tuning.config_check import ConfigError
     from suspension_tuning.nodes._parameters import ParameterError
     from suspension_tuning.nodes._unique import require_unique, start_check
 
@@ -108,9 +110,9 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
         return  # Ctrl-C or SIGTERM during the check
     try:
         node = make_node()
-    except ParameterError as error:
+    except (ParameterError, ConfigError) as error:
         rclpy.try_shutdown()
-        print(f'not started: {error}', file=sys.stderr)
+        print(f'{name or "node"}: not started: {error}', file=sys.stderr)
         sys.exit(2)
     except KeyboardInterrupt:  # Ctrl-C while the node is made
         rclpy.try_shutdown()

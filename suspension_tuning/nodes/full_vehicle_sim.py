@@ -74,6 +74,7 @@ from suspension_tuning_interfaces.msg import TimeHistories, ValveState, VehicleS
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
 from suspension_tuning import evaluation, simplified_inputs, telemetry
+from suspension_tuning.config_check import ConfigError, check_config
 from suspension_tuning.fmu import FmuConfigError, MappingError, worker_model
 from suspension_tuning.fmu.fmi_log import FmuMessage
 from suspension_tuning.fmu.isolated import DEFAULT_TIMEOUT_S, FmuRunCancelledError
@@ -164,6 +165,11 @@ class FullVehicleSimNode(Node):
         # mapped variable; always; never), docs/fmu.md
         self.declare_parameter('plausibility_check', 'auto')
         self.declare_parameter('fmu_isolation', 'process')
+        try:  # the configuration files, before they are used (ConfigError: one line)
+            check_config(builtin_model=str(self.get_parameter('model').value) == 'builtin')
+        except ConfigError:
+            Node.destroy_node(self)
+            raise
         # full-model integrator when a request names none (config/vehicle.yaml default)
         self.declare_parameter('integrator', load_vehicle_params().integrator.method)
         try:  # before anything else: a bad FMU set-up leaves nothing half-started
@@ -354,7 +360,7 @@ def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning full_vehicle_sim``."""
     try:
         run_node(FullVehicleSimNode, args, name='full_vehicle_sim', rename=True)
-    except (FmuConfigError, MappingError) as error:  # ParameterError: run_node
+    except (FmuConfigError, MappingError) as error:  # ParameterError, ConfigError: run_node
         import rclpy
         rclpy.try_shutdown()
         print(f'full_vehicle_sim: not started: {error}', file=sys.stderr)
