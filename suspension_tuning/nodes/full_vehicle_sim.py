@@ -102,6 +102,13 @@ TELEMETRY = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
 #: here: 5,000 take 4 minutes).
 MAX_DESIGNS_PER_REQUEST = 128
 
+#: Wall-clock time the FMU start-up plausibility check may take in all, s (parameter
+#: ``plausibility_timeout_s``; runs in child processes): the bound on the time a worker
+#: is unreachable at start because of it (docs/fmu.md).  An estimate: an FMU whose
+#: centre runs take longer gets its check cut short with a warning naming the
+#: parameter, and serves all the same (raise it for a slow FMU).
+PLAUSIBILITY_TIMEOUT_S = 120.0
+
 
 class TopicValveController:
     """A mixed-scenario valve controller reached over topics, step-locked.
@@ -175,6 +182,7 @@ class FullVehicleSimNode(Node):
         try:  # before anything else: a bad FMU set-up leaves nothing half-started
             declare_numbers(self, {'telemetry_decimation': 2, 'closed_loop_timeout_s': 5.0,
                                    'fmu_timeout_s': DEFAULT_TIMEOUT_S, 'fmu_processes': 1,
+                                   'plausibility_timeout_s': PLAUSIBILITY_TIMEOUT_S,
                                    'liveliness_lease_s': 0.5,
                                    'max_designs_per_request': MAX_DESIGNS_PER_REQUEST})
             param = self.get_parameter
@@ -238,7 +246,17 @@ class FullVehicleSimNode(Node):
             log.info('units the FMU does not declare: ' + '; '.join(self.fmu.undeclared_units))
         if mode == 'never' or (mode == 'auto' and not self.fmu.undeclared_units):
             return
-        numbers, warnings = self.fmu.plausibility()
+        # Said before the runs: the worker (and a graph starting it) answers nothing
+        # until they end, at most this long when they run in child processes.
+        budget_s = min(float(self.get_parameter('plausibility_timeout_s').value),
+                       float(self.get_parameter('fmu_timeout_s').value))
+        scenarios = ', '.join(self.fmu.mapping.scenarios)
+        isolated = str(self.get_parameter('fmu_isolation').value) == 'process'
+        log.info(f'plausibility check: one run of the centre design in {scenarios}, '
+                 + (f'at most {budget_s:g} s in all (plausibility_timeout_s, fmu_timeout_s)'
+                    if isolated else 'not bounded (fmu_isolation none)')
+                 + '; the worker serves once it ends')
+        numbers, warnings = self.fmu.plausibility(budget_s if isolated else None)
         log.info('plausibility check (centre design): ' + ', '.join(
             f'{scenario} ' + ', '.join(f'{k} {v:.3g}' for k, v in found.items())
             for scenario, found in numbers.items()))
