@@ -129,3 +129,40 @@ def check_config(builtin_model: bool = True) -> None:
     optimiser = str(directory / 'optimiser.yaml')
     for loader in (load_options, load_correction_options, load_min_fit_r2):
         _run(lambda f=loader: f(optimiser), 'config/optimiser.yaml')
+
+
+def check_params_files(argv: list[str]) -> None:
+    """Check the ROS parameter files named on a command line (``--params-file FILE``).
+
+    rcl parses them when the program initialises ROS and ends it with a traceback on a
+    syntax error; checked first, each one is refused in one line naming the file, the
+    line and the column.  Only the arguments after ``--ros-args`` are ROS arguments.
+
+    Raises
+    ------
+    ConfigError
+        A parameter file that does not exist, cannot be read, is not valid YAML or does
+        not hold a mapping.
+    """
+    import yaml
+
+    from suspension_tuning.paths import yaml_error_text
+
+    ros = False
+    for k, arg in enumerate(argv):
+        if arg == '--ros-args':
+            ros = True
+        elif arg == '--':
+            ros = False
+        elif ros and arg == '--params-file' and k + 1 < len(argv):
+            path = Path(argv[k + 1])
+            try:
+                data = yaml.safe_load(path.read_text(encoding='utf-8'))
+            except OSError as error:
+                raise ConfigError(f'--params-file {path}: cannot read it '
+                                  f'({error.strerror or error})') from None
+            except yaml.YAMLError as error:
+                raise ConfigError(f'--params-file {path}: {yaml_error_text(error)}') from None
+            if not isinstance(data, dict):
+                raise ConfigError(f'--params-file {path}: expected a mapping of node names '
+                                  'to ros__parameters')

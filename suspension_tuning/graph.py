@@ -156,6 +156,12 @@ class SpinningGraph:
 def main(argv: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning graph``."""
     argv = sys.argv if argv is None else ['graph', *argv]
+    from suspension_tuning.config_check import ConfigError, check_params_files
+    try:  # before rcl parses them: a syntax error there ends in its traceback
+        check_params_files(argv)
+    except ConfigError as error:
+        print(f'graph: not started: {error}', file=sys.stderr)
+        sys.exit(2)
     parser = argparse.ArgumentParser(prog='graph', description=__doc__.split('\n')[0])
     parser.add_argument('--workers', type=int, default=1,
                         help='simulation workers in this process (0: only those found on the '
@@ -168,7 +174,6 @@ def main(argv: list[str] | None = None) -> None:
     from suspension_tuning.nodes._unique import require_unique, start_check
     # One discovery window for every node of the graph, spent importing the nodes.
     check = start_check('graph', node_names(args.workers, not args.no_record))
-    from suspension_tuning.config_check import ConfigError
     from suspension_tuning.fmu import FmuConfigError, MappingError
     from suspension_tuning.nodes import (  # noqa: F401 - imported during the window
         coordinator,

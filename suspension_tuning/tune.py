@@ -62,6 +62,7 @@ from rclpy.signals import SignalHandlerOptions
 from suspension_tuning_interfaces.action import Optimise
 from suspension_tuning_interfaces.msg import Constraint
 
+from suspension_tuning.config_check import check_params_files
 from suspension_tuning.nodes._spin import wait_future
 from suspension_tuning.nodes._unique import POLL_S, discovery_window_s
 from suspension_tuning.physical_metrics import metric_lines
@@ -400,6 +401,11 @@ def wait_for_server(client: ActionClient, action: str, domain_id: int,
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``ros2 run suspension_tuning tune``."""
     args_list = sys.argv[1:] if argv is None else argv
+    try:  # before rcl parses them: a syntax error there ends in its traceback
+        check_params_files(args_list)
+    except ValueError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
     ros_args = rclpy.utilities.remove_ros_args(['tune', *args_list])[1:]
     args = parse_args(ros_args)
     try:  # checked here too, so that a typo is reported before any ROS set-up

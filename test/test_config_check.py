@@ -136,3 +136,16 @@ def test_tune_start_with_a_yaml_error_says_so_in_one_line(config_copy):
     assert run.returncode == 2
     [line] = run.stderr.strip().splitlines()
     assert line.startswith('error: ') and 'design_space.yaml: not valid YAML at line' in line
+
+
+@pytest.mark.parametrize('command', ['graph', 'coordinator', 'tune'])
+def test_a_parameter_file_with_a_yaml_error_is_refused_in_one_line(command, tmp_path):
+    params = tmp_path / 'params.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    design_timeout_s: [360\n')
+    run = subprocess.run([str(Path(sys.prefix) / 'bin' / command), '--ros-args',
+                          '--params-file', str(params)],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2
+    [line] = run.stderr.strip().splitlines()
+    assert line.endswith(f'--params-file {params}: not valid YAML at line 4, column 1: '
+                         "expected ',' or ']', but got '<stream end>'"), line

@@ -101,10 +101,15 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
     ParameterError`) or a configuration file it cannot use (:class:`~suspension_tuning.
     config_check.ConfigError`) ends the process with its one-line message and exit code 2.
     """
-    from suspension_tuning.config_check import ConfigError
+    from suspension_tuning.config_check import ConfigError, check_params_files
     from suspension_tuning.nodes._parameters import ParameterError
     from suspension_tuning.nodes._unique import require_unique, start_check
 
+    try:  # before rcl parses them: a syntax error there ends in its traceback
+        check_params_files(sys.argv if args is None else list(args))
+    except ConfigError as error:
+        print(f'{name or "node"}: not started: {error}', file=sys.stderr)
+        sys.exit(2)
     rclpy.init(args=args)
     if name is not None and not require_unique(name, start_check(name, [name]), rename):
         return  # Ctrl-C or SIGTERM during the check
