@@ -149,3 +149,27 @@ def test_a_parameter_file_with_a_yaml_error_is_refused_in_one_line(command, tmp_
     [line] = run.stderr.strip().splitlines()
     assert line.endswith(f'--params-file {params}: not valid YAML at line 4, column 1: '
                          "expected ',' or ']', but got '<stream end>'"), line
+
+
+@pytest.mark.ros
+def test_a_goal_after_a_config_file_broke_reports_the_files_line_first(
+        config_copy, ros_context, executor):
+    from rclpy.action import ActionClient
+    from rclpy.node import Node
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning.nodes.coordinator import CoordinatorNode
+    from suspension_tuning.testing import wait_for_future as wait
+
+    coordinator = CoordinatorNode(context=ros_context)  # starts on the valid copy
+    client_node = Node('config_goal_client', context=ros_context)
+    executor.add(coordinator, client_node)
+    _edit(config_copy, 'design_space.yaml', SPRING_FRONT,
+          'front: {low: 0.1, high: 0.6, baseline: 0.9}')  # edited while it runs
+    client = ActionClient(client_node, Optimise, '/coordinator/optimise')
+    assert client.wait_for_server(timeout_sec=10.0)
+    handle = wait(client.send_goal_async(Optimise.Goal(scenario='ride', n_vars=2)), 30.0)
+    result = wait(handle.get_result_async(), 60.0).result
+    assert not result.success
+    assert result.message == ('configuration: config/design_space.yaml: '
+                              'spring.front.baseline: 0.9 lies outside 0.1-0.6 L')
