@@ -14,9 +14,9 @@ worker.  A piece whose worker is lost (liveliness), vanishes or stays silent lon
 than ``design_timeout_s`` per design is sent again to another worker; that worker is
 used again once it is back: its liveliness regained, a model description from a new
 process (one restarted under its name, also within the liveliness lease, when its loss
-was never reported), or an answer to a ping (a lost or failed worker whose ``evaluate``
-is matched is pinged: DDS may not report the liveliness of a process continued after
-a stop longer than its participant lease).  "back" is said once per return.  A design
+was never reported), or an answer to a ping (a lost worker whose ``evaluate`` is
+matched is pinged: DDS may not report the liveliness of a process continued after a
+stop longer than its participant lease).  "back" is said once per return.  A design
 gives the same bits alone or in a batch, so how the pieces fall does not change a
 result.
 
@@ -226,15 +226,16 @@ class SimulationPool:
     def _ping(self, worker: Worker) -> None:
         """Ping a worker that is not ready (again, once the last ping is overdue).
 
-        A worker that is up gets pinged before its first piece; one that was lost or
-        failed but whose ``evaluate`` is matched gets pinged too: an answer shows that
-        it runs again (a process continued after a stop, or restarted under its name,
-        whose liveliness DDS may not report again), and takes it back.
+        A worker that is up gets pinged before its first piece; one that was lost (its
+        liveliness) but whose ``evaluate`` is matched gets pinged too: an answer shows
+        that it runs again (a process continued after a stop, or restarted under its
+        name, whose liveliness DDS may not report again), and takes it back.  A worker
+        that failed otherwise (hung, a failed call) is used again at the next goal
+        (:meth:`revive`).
         """
-        if worker.ready or worker.model is None or worker.refused:
+        if worker.ready or worker.model is None:
             return
-        if not (self._up(worker) or ((worker.gone or worker.failed)
-                                     and worker.client.service_is_ready())):
+        if not (self._up(worker) or (worker.gone and worker.client.service_is_ready())):
             return
         now = time.monotonic()
         if worker.ping is not None:

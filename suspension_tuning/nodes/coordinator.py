@@ -661,7 +661,7 @@ class CoordinatorNode(Node):
                 goal_handle.canceled()
                 text = 'cancelled'
             else:
-                text = config_first(str(error))
+                text = str(error) if self.stopping else config_first(str(error))
                 self.get_logger().error(f'optimisation failed: {text}')
                 goal_handle.abort()
             message = Optimise.Result(success=False, message=text, history=history_msgs,
