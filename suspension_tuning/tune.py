@@ -35,6 +35,11 @@ then the baseline design and the physical metrics of both (seat W_b RMS in m/s^2
 first roll peak in deg, roll-rate RMS in deg/s, lift-off time per tyre in %).  Ctrl-C
 cancels the goal and exits with status 130.
 
+Without an action server on the ROS domain, ``tune`` says at once that it waits for it
+(the action and the domain), and after ``--server-timeout`` what to check.  Numbers out
+of range (``--n-vars -2``, ``--max-iterations -1``, ``--move-limit -0.2``) are refused as
+argparse refuses any bad option, naming it (exit status 2).
+
 The goal goes to one action server only: with more than one server of the action on
 the ROS domain (e.g. a second ``graph`` left running) each would run it, so ``tune``
 says so and exits with status 2 before sending it (it waits up to the nodes' discovery
