@@ -87,11 +87,16 @@ def main(argv: list[str] | None = None) -> int:
     from rclpy.parameter import Parameter
     from suspension_tuning_interfaces.action import Optimise
 
+    from suspension_tuning.config_check import ConfigError, check_config
     from suspension_tuning.graph import SpinningGraph, build_nodes
     from suspension_tuning.inspect_bag import write_plots
     from suspension_tuning.nodes._spin import wait_future
     from suspension_tuning.tune import format_feedback
-
+    try:  # the configuration first: one line, not a traceback from a node
+        check_config(builtin_model=True)
+    except ConfigError as error:
+        print(f'demo: not started: {error}', file=sys.stderr)
+        return 2
     rclpy.init()
     bags = Path(args.bags).resolve()
     nodes = build_nodes(workers=1, record=True, overrides={

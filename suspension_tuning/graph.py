@@ -112,6 +112,12 @@ def build_nodes(workers: int = 1, record: bool = True, context=None,
 def main(argv: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning graph``."""
     argv = sys.argv if argv is None else ['graph', *argv]
+    from suspension_tuning.config_check import ConfigError, check_params_files
+    try:  # before rcl parses them: a syntax error there ends in its traceback
+        check_params_files(argv)
+    except ConfigError as error:
+        print(f'graph: not started: {error}', file=sys.stderr)
+        sys.exit(2)
     parser = argparse.ArgumentParser(prog='graph', description=__doc__.split('\n')[0])
     parser.add_argument('--workers', type=int, default=1,
                         help='simulation workers in this process (0: only those found on the '
@@ -147,7 +153,7 @@ def main(argv: list[str] | None = None) -> None:
                 else [Parameter('telemetry_rate', value=args.telemetry_rate)])
         nodes = build_nodes(args.workers, not args.no_record,
                             overrides={name: live for name in worker_names(args.workers)})
-    except (FmuConfigError, MappingError, ParameterError) as error:
+    except (FmuConfigError, MappingError, ParameterError, ConfigError) as error:
         # As the node alone says it (full_vehicle_sim's main): one line, exit code 2.
         rclpy.try_shutdown()
         print(f'{getattr(error, "node_name", "graph")}: not started: {error}', file=sys.stderr)

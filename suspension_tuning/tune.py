@@ -35,6 +35,11 @@ then the baseline design and the physical metrics of both (seat W_b RMS in m/s^2
 first roll peak in deg, roll-rate RMS in deg/s, lift-off time per tyre in %).  Ctrl-C
 cancels the goal and exits with status 130.
 
+Without an action server on the ROS domain, ``tune`` says at once that it waits for it
+(the action and the domain), and after ``--server-timeout`` what to check.  Numbers out
+of range (``--n-vars -2``, ``--max-iterations -1``, ``--move-limit -0.2``) are refused as
+argparse refuses any bad option, naming it (exit status 2).
+
 The goal goes to one action server only: with more than one server of the action on
 the ROS domain (e.g. a second ``graph`` left running) each would run it, so ``tune``
 says so and exits with status 2 before sending it (it waits up to the nodes' discovery
@@ -48,6 +53,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import threading
 import time
@@ -61,6 +67,7 @@ from rclpy.signals import SignalHandlerOptions
 from suspension_tuning_interfaces.action import Optimise
 from suspension_tuning_interfaces.msg import Constraint
 
+from suspension_tuning.config_check import check_params_files
 from suspension_tuning.nodes._spin import wait_future
 from suspension_tuning.nodes._unique import POLL_S, discovery_window_s
 from suspension_tuning.physical_metrics import metric_lines
@@ -69,12 +76,44 @@ from suspension_tuning.tuning import ConstraintSpec
 from suspension_tuning.vehicle.design import DesignSpace, load_design_space
 
 
+def _number(kind: type, minimum: float, strict: bool, maximum: float = float('inf')):
+    """An argparse type: a finite ``kind`` (int or float) from ``minimum`` to ``maximum``.
+
+    ``strict``: greater than ``minimum``, else at least ``minimum``.  Refused values get
+    argparse's message naming the option (exit status 2), before any ROS set-up: the
+    goal's fields are unsigned (``max_iterations``: uint32) or must be positive (the move
+    limit), and a negative number would fail far from what the user typed.
+    """
+    def parse(text: str) -> int | float:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f'{text!r} is not a {"whole number" if kind is int else "number"}') from None
+        low_ok = value > minimum if strict else value >= minimum
+        if not (low_ok and value <= maximum and math.isfinite(value)):
+            bound = f'{"greater than" if strict else "at least"} {minimum:g}'
+            if math.isfinite(maximum):
+                bound += f' and at most {maximum}'
+            raise argparse.ArgumentTypeError(f'must be {bound}, got {text}')
+        return value
+
+    parse.__name__ = kind.__name__  # argparse names the type in its messages
+    return parse
+
+
 def parse_args(argv: list[str]) -> argparse.Namespace:
-    """Parse the command-line options of ``tune``."""
+    """Parse the command-line options of ``tune``.
+
+    Out-of-range numbers (``--n-vars -2``, ``--max-iterations -1``, ``--move-limit
+    -0.2``) are refused as argparse refuses any bad option: usage, a line naming the
+    option, exit status 2.
+    """
     parser = argparse.ArgumentParser(prog='tune', description=__doc__.split('\n')[0])
     parser.add_argument('--scenario', default='ride',
                         help="'ride' or 'handling' ('mixed' too with --evaluate)")
-    parser.add_argument('--n-vars', type=int, default=2, help='2 or 4 design variables')
+    parser.add_argument('--n-vars', type=int, choices=(2, 4), default=2,
+                        help='2 or 4 design variables')
     start = parser.add_mutually_exclusive_group()
     start.add_argument('--x0', type=float, nargs='*', default=[],
                        help='normalised start point (default: centre of the design space)')
@@ -84,8 +123,12 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                             'gas_volume_front_l=... dpsf_rear=... gas_volume_rear_l=... '
                             '(4): the names and units of config/design_space.yaml')
     parser.add_argument('--gradient', default='simplified', help="'simplified' or 'full'")
-    parser.add_argument('--max-iterations', type=int, default=0, help='0 = coordinator default')
-    parser.add_argument('--move-limit', type=float, default=0.0, help='0 = coordinator default')
+    parser.add_argument('--max-iterations', type=_number(int, 0, False, 2**32 - 1),
+                        default=0,
+                        help='0 = coordinator default')
+    parser.add_argument('--move-limit', type=_number(float, 0.0, False),
+                        default=0.0,
+                        help='initial move limit, normalised (0 = coordinator default)')
     parser.add_argument('--constraint', action='append', default=[], metavar='SPEC',
                         help="extra constraint '<scenario>:<quantity><=<bound>', e.g. "
                         "'handling:f_hand<=0.8' or 'handling:roll_first_peak_deg<=4' "
@@ -102,8 +145,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                         help='one recorded full-model run of --x0 (default the centre), no '
                              'optimisation')
     parser.add_argument('--action', default='/coordinator/optimise', help='action name')
-    parser.add_argument('--server-timeout', type=float, default=30.0,
-                        help='seconds to wait for the coordinator')
+    parser.add_argument('--server-timeout', type=_number(float, 0.0, True),
+                        default=30.0, help='seconds to wait for the coordinator')
     return parser.parse_args(argv)
 
 
@@ -330,9 +373,44 @@ def cancel(handle) -> int:
     return 130
 
 
+#: How long ``tune`` looks for the action server before it says it is waiting, s.
+QUIET_WAIT_S = 0.5
+
+
+def wait_for_server(client: ActionClient, action: str, domain_id: int,
+                    timeout_s: float) -> bool:
+    """Wait for the action server, saying so when it is not there at once.
+
+    A graph on the same domain is usually discovered within ``QUIET_WAIT_S``; otherwise
+    one line on stderr names the action, the ROS domain and the time-out, and when the
+    wait ends without a server, a second line says what to check.
+
+    Returns
+    -------
+    bool
+        True when the server was found.
+    """
+    if client.wait_for_server(timeout_sec=min(QUIET_WAIT_S, timeout_s)):
+        return True
+    print(f'waiting for the action server {action} on ROS domain {domain_id} (up to '
+          f'{timeout_s:g} s; --server-timeout) ...', file=sys.stderr, flush=True)
+    if client.wait_for_server(timeout_sec=max(0.0, timeout_s - QUIET_WAIT_S)):
+        return True
+    print(f'error: no action server {action} within {timeout_s:g} s on ROS domain '
+          f'{domain_id}: is the graph running (graph, or the coordinator node) with the '
+          'same ROS_DOMAIN_ID, ROS_AUTOMATIC_DISCOVERY_RANGE and namespace? (--action '
+          'names another server)', file=sys.stderr)
+    return False
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``ros2 run suspension_tuning tune``."""
     args_list = sys.argv[1:] if argv is None else argv
+    try:  # before rcl parses them: a syntax error there ends in its traceback
+        check_params_files(args_list)
+    except ValueError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
     ros_args = rclpy.utilities.remove_ros_args(['tune', *args_list])[1:]
     args = parse_args(ros_args)
     try:  # checked here too, so that a typo is reported before any ROS set-up
@@ -361,9 +439,7 @@ def main(argv: list[str] | None = None) -> int:
     spinner.start()
     sending, handle = None, None
     try:
-        if not client.wait_for_server(timeout_sec=args.server_timeout):
-            print(f'error: no action server {args.action} within {args.server_timeout} s',
-                  file=sys.stderr)
+        if not wait_for_server(client, args.action, domain_id, args.server_timeout):
             return 2
         count = servers_seen(node, args.action, started, window_s) if window_s > 0 else 1
         if count > 1:

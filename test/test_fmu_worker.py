@@ -9,6 +9,7 @@ worker converges to the in-process bits and its bag names the FMU and the mappin
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -380,3 +381,50 @@ def test_fmu_graph_with_a_junk_fmu_says_why_in_one_line_and_exits_2(tmp_path):
     assert done.stderr.startswith('full_vehicle_sim: not started: junk.fmu: not a readable '
                                   'FMU'), done.stderr
     assert 'Traceback' not in done.stderr and done.stderr.count('\n') == 1, done.stderr
+
+
+def test_fmu_worker_says_what_its_plausibility_run_waits_for_and_a_hang_is_bounded(
+        ros_context, fmus, tmp_path, monkeypatch, capfd):
+    """A start-up plausibility run that hangs: the log names the run and its limit
+    first; the run is stopped at plausibility_timeout_s (not fmu_timeout_s, 300 s) with
+    a warning, and the worker serves."""
+    import shutil
+
+    from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
+    from suspension_tuning.paths import CONFIG_DIR_VARIABLE, config_dir
+
+    # FaultyRide hangs for a damper scale above 2.5 after 0.2 s: a design space of
+    # dpsf 2.6-3.0 puts the centre design (the check's run) at 2.8.
+    config = tmp_path / 'config'
+    shutil.copytree(config_dir(), config)
+    space = config / 'design_space.yaml'
+    space.write_text(space.read_text().replace('{low: 0.1, high: 3.0, baseline: 1.0}',
+                                               '{low: 2.6, high: 3.0, baseline: 2.8}'))
+    monkeypatch.setenv(CONFIG_DIR_VARIABLE, str(config))
+    mapping = failing_mapping()
+    mapping['scenarios']['ride'].update(stop_time_s=1.0, settle_s=0.5,
+                                        parameters={'fault': 3})  # 3: hang
+    limit_s = 3.0
+    params = [*fmu_parameters(fmus['faulty'], write_mapping(tmp_path, mapping)),
+              Parameter('plausibility_check', value='always'),
+              Parameter('plausibility_timeout_s', value=limit_s)]
+    capfd.readouterr()
+    start = time.monotonic()
+    node = FullVehicleSimNode(context=ros_context, parameter_overrides=params)
+    try:
+        elapsed = time.monotonic() - start
+        log = capfd.readouterr().err
+        warnings = node.model_description['plausibility']['warnings']
+        assert node.evaluate_service is not None  # it serves
+    finally:
+        node.destroy_node()
+    said = [line for line in log.splitlines() if 'plausibility' in line]
+    assert said[0].endswith('plausibility check: one run of the centre design in ride, at '
+                            'most 3 s in all (plausibility_timeout_s, fmu_timeout_s); the '
+                            'worker serves once it ends'), log
+    assert ('ride: the run of the centre design failed (design 0 (x = [0.5, 0.5]): no result '
+            "within 3 s (the plausibility check's limit, plausibility_timeout_s): the FMU "
+            'hung at t = 0.202 s') in warnings[0]
+    # The limit plus the child process's load of the FMU (3-15 s measured, isolated.py
+    # START_TIMEOUT_S), far below fmu_timeout_s (300 s).
+    assert elapsed < limit_s + 60.0

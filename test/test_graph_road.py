@@ -39,7 +39,8 @@ def test_ride_optimisation_through_the_graph_on_crg_and_csv_road_files(
 
     from suspension_tuning.graph import SpinningGraph, build_nodes
     from suspension_tuning.inspect_bag import summary
-    from suspension_tuning.paths import file_sha256
+    from suspension_tuning.paths import config_dir, file_sha256
+    from suspension_tuning.tune import goal_road
 
     nodes = build_nodes(workers=1, record=True, context=ros_context, overrides={
         'gradient_evaluator': [Parameter('calibration_dir', value=str(tmp_path / 'cal'))],
@@ -68,6 +69,16 @@ def test_ride_optimisation_through_the_graph_on_crg_and_csv_road_files(
             scenario='ride', n_vars=2, gradient_source='full', max_iterations=1,
             road=str(tmp_path / 'no_such_road.crg'))), 30.0)
         refused = wait(bad.get_result_async(), 60.0).result
+        # the ASAM belgian block cut after 500 of its 1001 data rows, repetition asked
+        # (tune --road cut.crg --repeat-road): refused, naming the rows
+        block = config_dir() / 'roads' / 'belgian_block.crg'
+        data = block.read_bytes()
+        start = data.index(b'\n', data.index(b'$$$$')) + 1
+        (tmp_path / 'cut.crg').write_bytes(data[:start + 500 * ((len(data) - start) // 1001)])
+        cut = wait(client.send_goal_async(Optimise.Goal(
+            scenario='ride', n_vars=2, gradient_source='full', max_iterations=1,
+            road=goal_road(str(tmp_path / 'cut.crg'), repeat=True))), 30.0)
+        truncated = wait(cut.get_result_async(), 60.0).result
     finally:
         graph.shutdown()  # the recorder closes the run's bag
     for result in results.values():
@@ -78,6 +89,10 @@ def test_ride_optimisation_through_the_graph_on_crg_and_csv_road_files(
     assert results['csv'].history[0].f == pytest.approx(results['crg'].history[0].f, rel=1e-6)
     assert results['crg'].n_calibration_runs == SAMPLES
     assert not refused.success and 'no_such_road.crg: no such file' in refused.message
+    assert not truncated.success and truncated.n_full_runs == 0
+    assert ('cut.crg: the header (reference_line_start_u 730 to reference_line_end_u 740 m, '
+            'reference_line_increment 0.01 m) gives 1001 data rows, 10 m; the data has 500 '
+            'rows') in truncated.message
     # the evaluation: one full run at the centre, the optimisation's first iterate
     assert evaluated.success and evaluated.n_full_runs == 1 and len(evaluated.history) == 1
     assert evaluated.f == results['csv'].history[0].f

@@ -178,20 +178,15 @@ def test_records_topics_service_events_and_action_feedback_and_status(
     events = [decode(contents, m) for m in contents.on('/sim_0/evaluate/_service_event')]
     responses = [e.response[0] for e in events if e.response]
     assert list(responses[0].f) == [0.5, 1.0]  # 2 x designs
-    # and with rosbags, a reader we did not write (bytes as Fast DDS delivered them)
-    from rosbags.rosbag2 import Reader
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    # and with rosbags' AnyReader, a reader we did not write that checks every channel's
+    # type hash against its schema text (bytes as Fast DDS delivered them)
+    from rosbags.highlevel import AnyReader
 
-    typestore = get_typestore(Stores.EMPTY)
-    with Reader(path) as reader:
-        names = {}
-        for connection in reader.connections:
-            types = get_types_from_msg(connection.msgdef.data, connection.msgtype)
-            typestore.register(types)
-            names[connection.topic] = next(iter(types))  # rosbags: pkg/srv/msg/T
+    with AnyReader([path]) as reader:
+        typestore = reader.typestore
         decoded = 0
         for connection, _, raw in reader.messages():
-            msgdef = typestore.get_msgdef(names[connection.topic])
+            msgdef = typestore.get_msgdef(connection.msgtype)
             _, end = msgdef.deserialize_cdr_le(raw[4:], 0, msgdef.cls, typestore)
             assert 0 <= len(raw) - 4 - end <= 8  # payload ends within the DDS sample
             decoded += 1

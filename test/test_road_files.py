@@ -77,6 +77,53 @@ def test_crg_truncated_file_is_refused(tmp_path):
         rf.read_crg_tracks(header_only, TRACK_M)
 
 
+def _cut_block(path: Path, rows: int) -> Path:
+    """The ASAM belgian_block.crg with only its first ``rows`` data rows (of 1001)."""
+    data = BLOCK.read_bytes()
+    start = data.index(b'\n', data.index(b'$$$$')) + 1
+    row_bytes = (len(data) - start) // 1001  # 341 long sections + phi, 4-byte floats
+    path.write_bytes(data[:start + rows * row_bytes])
+    return path
+
+
+TRUNCATED_LINE = ('the header (reference_line_start_u 730 to reference_line_end_u 740 m, '
+                  'reference_line_increment 0.01 m) gives 1001 data rows, 10 m; the data '
+                  'has 500 rows, 4.99 m: a truncated or damaged file')
+
+
+def test_crg_cut_after_whole_rows_is_refused_naming_header_and_data_rows(tmp_path):
+    # Cut at a row boundary, the binary data stays well-formed: only the header's u range
+    # (730-740 m every 0.01 m: 1001 rows) tells that half of it is missing.
+    cut = _cut_block(tmp_path / 'cut.crg', 500)
+    with pytest.raises(rf.RoadFileError) as error:
+        rf.read_crg_tracks(cut, TRACK_M)
+    assert str(error.value) == f'road file {cut}: {TRUNCATED_LINE}'
+    spec = rf.FileRoadSpec(str(cut), repeat=True)  # repetition does not make it whole
+    with pytest.raises(rf.RoadFileError, match='gives 1001 data rows'):
+        rf.file_road_profile(spec)
+
+
+def test_crg_header_and_data_disagreeing_on_long_sections_is_refused(tmp_path):
+    data = BLOCK.read_bytes()
+    changed = tmp_path / 'narrow.crg'  # header: -1.7 to 1.7 m every 0.01 m: 341 sections
+    changed.write_bytes(data.replace(b'long_section_v_increment =  1.0000000000000000e-002',
+                                     b'long_section_v_increment =  2.0000000000000000e-002'))
+    with pytest.raises(rf.RoadFileError, match=r'long_section_v_increment 0.02 m\) gives 171 '
+                                               r'long sections; the data has 341'):
+        rf.read_crg_tracks(changed, TRACK_M)
+
+
+def test_road_command_refuses_a_truncated_crg_in_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    cut = _cut_block(tmp_path / 'cut.crg', 500)
+    run = subprocess.run([str(Path(sys.prefix) / 'bin' / 'road'), str(cut)],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2
+    assert run.stderr.strip() == f'error: road file {cut}: {TRUNCATED_LINE}'
+
+
 def test_crg_wrong_units_are_refused_with_the_channel_named(tmp_path):
     text = HANDMADE.read_text(encoding='latin-1')
     in_mm = tmp_path / 'mm.crg'

@@ -45,24 +45,28 @@ def test_sample_bag_holds_the_body_and_seat_vertical_accelerations():
             assert 0.3 < np.sqrt(np.mean(seat_z ** 2)) < 6.0, topic
 
 
-def test_sample_bag_decodes_with_a_reader_we_did_not_write():
-    from rosbags.rosbag2 import Reader
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+def test_sample_bag_decodes_with_rosbags_anyreader_which_checks_every_type_hash():
+    from rosbags.highlevel import AnyReader
 
-    # rosbags' AnyReader registers every connection's type at open and trips over the
-    # service-event type names (it files srv types under pkg/srv/msg/...); the plain
-    # Reader with the bag's own ros2msg schemas decodes the optimisation topics.
-    typestore = get_typestore(Stores.EMPTY)
-    count = 0
-    with Reader(SAMPLE) as reader:
-        wanted = [c for c in reader.connections if c.topic == '/optimisation/progress']
-        for connection in wanted:
-            typestore.register(get_types_from_msg(connection.msgdef.data, connection.msgtype))
-        for connection, _, raw in reader.messages(connections=wanted):
-            msg = typestore.deserialize_cdr(raw, connection.msgtype)
-            assert len(msg.x) == 4 and msg.n_full_runs >= 1
-            count += 1
-    assert count >= 2
+    from suspension_tuning.bag.reader import read_messages
+
+    # AnyReader recomputes each channel's RIHS01 hash from its schema text at open and
+    # refuses a mismatch; then every message, service events and action topics included.
+    counts: dict[str, int] = {}
+    with AnyReader([SAMPLE]) as reader:
+        for connection in reader.connections:
+            assert connection.digest.startswith('RIHS01_')
+            assert reader.typestore.hash_rihs01(connection.msgtype) == connection.digest
+        for connection, _, raw in reader.messages():
+            msg = reader.deserialize(raw, connection.msgtype)
+            counts[connection.topic] = counts.get(connection.topic, 0) + 1
+            if connection.topic == '/optimisation/progress':
+                assert len(msg.x) == 4 and msg.n_full_runs >= 1
+            if connection.topic == '/full_vehicle_sim/evaluate/_service_event':
+                assert len(msg.request) + len(msg.response) == 1
+    assert counts == {t: n for t, n in read_messages(SAMPLE).counts().items() if n}
+    assert counts['/full_vehicle_sim/evaluate/_service_event'] >= 2
+    assert counts['/coordinator/optimise/_action/feedback'] >= 2
 
 
 def test_every_message_of_the_sample_bag_decodes_with_foxglove(foxglove_check):

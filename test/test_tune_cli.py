@@ -170,12 +170,39 @@ def test_tune_and_inspect_bag_show_physical_metrics_the_recorded_telemetry_confi
             reported[f'tyre_lift_off_pct_{tyre}'], abs=1.0)
 
 
-def test_tune_without_a_coordinator_says_so(ros_context):
+def test_tune_without_a_coordinator_says_it_waits_then_what_to_check(ros_context):
     tune = Path(sys.prefix) / 'bin' / 'tune'
+    domain = os.environ['ROS_DOMAIN_ID']
     run = subprocess.run([str(tune), '--server-timeout', '1', '--action', '/nobody/optimise'],
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 2
-    assert 'no action server /nobody/optimise' in run.stderr
+    waiting, error = run.stderr.strip().splitlines()
+    # the wait is announced first, naming the action and the domain
+    assert waiting.startswith('waiting for the action server /nobody/optimise on ROS '
+                              f'domain {domain} (up to 1 s')
+    assert error.startswith(f'error: no action server /nobody/optimise within 1 s on ROS '
+                            f'domain {domain}: is the graph running')
+    assert 'ROS_DOMAIN_ID' in error
+
+
+@pytest.mark.parametrize(('option', 'value', 'reason'), [
+    ('--n-vars', '-2', "invalid choice: -2 (choose from 2, 4)"),
+    ('--max-iterations', '-1', 'must be at least 0 and at most 4294967295, got -1'),
+    # the goal's max_iterations is a uint32
+    ('--max-iterations', str(2**32), f'must be at least 0 and at most {2**32 - 1}, '
+                                     f'got {2**32}'),
+    ('--move-limit', '-0.2', 'must be at least 0, got -0.2'),
+    ('--move-limit', 'nan', 'must be at least 0, got nan'),
+    ('--server-timeout', '0', 'must be greater than 0, got 0'),
+])
+def test_tune_refuses_bad_numbers_naming_its_own_option(option, value, reason):
+    tune = Path(sys.prefix) / 'bin' / 'tune'
+    run = subprocess.run([str(tune), option, value], capture_output=True, text=True,
+                         timeout=60)
+    assert run.returncode == 2
+    assert run.stderr.splitlines()[0].startswith('usage: tune')
+    assert run.stderr.splitlines()[-1] == f'tune: error: argument {option}: {reason}'
+    assert 'Traceback' not in run.stderr and 'rho0' not in run.stderr
 
 
 def _serve_and_tune(ros_context, executor, action: str, execute, **server_options):

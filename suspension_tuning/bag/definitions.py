@@ -200,6 +200,8 @@ def _idl_to_msg(slot_type: object) -> str:
     if cls == 'BoundedWString':
         return f'wstring<={slot_type.maximum_size}'
     if cls == 'NamespacedType':
+        if slot_type.namespaces[-1] == 'action':  # its full name: it enters the hash
+            return '/'.join([*slot_type.namespaces, slot_type.name])
         return f'{slot_type.namespaces[0]}/{slot_type.name}'
     if cls == 'Array':
         return f'{_idl_to_msg(slot_type.value_type)}[{slot_type.size}]'
@@ -222,8 +224,10 @@ def _generated(full_name: str) -> tuple[str, dict[str, str]]:
     """A .msg text generated from the Python class (no constants, no comments).
 
     Returns the text and, sorted, the referenced name -> full name of each type it
-    uses (the ``pkg/Name`` in the text loses the ``srv``/``action`` namespace, the
-    class still knows it).
+    uses: a message and a service's part as ``pkg/Name``, an action's part by its full
+    name (``pkg/action/T_Feedback``: the name that enters the type hash; rosbags and
+    Foxglove keep it, mcap-ros2-support's parser does not, see bag/reader.py).  A
+    service's event is written as ``ros2idl`` in bags (:func:`schema_of`).
     """
     msg_class = message_class(full_name)
     names = list(msg_class.get_fields_and_field_types())
@@ -231,8 +235,8 @@ def _generated(full_name: str) -> tuple[str, dict[str, str]]:
     full: dict[str, str] = {}
     for slot_type in msg_class.SLOT_TYPES:
         for nested in _nested_names(slot_type):
-            package, _, name = nested.split('/')
-            full[f'{package}/{name}'] = nested
+            package, kind, name = nested.split('/')
+            full[nested if kind == 'action' else f'{package}/{name}'] = nested
     text = '\n'.join(lines) + '\n'
     return text, {ref: full[ref] for ref in referenced_names(text, full_name.split('/')[0])}
 
@@ -453,3 +457,89 @@ def type_hash(type_name: str) -> str:
                 if entry.get('type_name') == full:
                     return str(entry.get('hash_string', ''))
     return ''
+
+
+#: Schema encoding of the types whose full name rosbags' and Foxglove's ``ros2msg``
+#: readers cannot keep: services' parts and events (``pkg/srv/T_Event``).
+IDL_KINDS = ('srv',)
+
+
+def _idl_type(slot_type: object) -> str:
+    """One rosidl_parser type as an IDL type (arrays are written at the field)."""
+    cls = type(slot_type).__name__
+    if cls == 'BasicType':
+        return str(slot_type.typename)
+    if cls in ('UnboundedString', 'UnboundedWString'):
+        return 'string' if cls == 'UnboundedString' else 'wstring'
+    if cls in ('BoundedString', 'BoundedWString'):
+        kind = 'string' if cls == 'BoundedString' else 'wstring'
+        return f'{kind}<{slot_type.maximum_size}>'
+    if cls == 'NamespacedType':
+        return '::'.join([*slot_type.namespaces, slot_type.name])
+    if cls == 'UnboundedSequence':
+        return f'sequence<{_idl_type(slot_type.value_type)}>'
+    if cls == 'BoundedSequence':
+        return f'sequence<{_idl_type(slot_type.value_type)}, {slot_type.maximum_size}>'
+    raise DefinitionNotFoundError(f'unsupported IDL type {cls}')
+
+
+def _idl_struct(full_name: str) -> tuple[str, list[str]]:
+    """The IDL text of one type (its modules and struct) and the types it uses."""
+    msg_class = message_class(full_name)
+    package, kind, name = full_name.split('/')
+    fields, uses = [], []
+    for slot_type, field_name in zip(msg_class.SLOT_TYPES,
+                                     msg_class.get_fields_and_field_types()):
+        if type(slot_type).__name__ == 'Array':
+            fields.append(f'      {_idl_type(slot_type.value_type)} {field_name}'
+                          f'[{slot_type.size}];')
+        else:
+            fields.append(f'      {_idl_type(slot_type)} {field_name};')
+        uses += [n for n in _nested_names(slot_type) if n not in uses]
+    body = '\n'.join(fields) or '      uint8 structure_needs_at_least_one_member;'
+    text = (f'module {package} {{\n  module {kind} {{\n    struct {name} {{\n{body}\n'
+            f'    }};\n  }};\n}};\n')
+    return text, uses
+
+
+@cache
+def idl_definition_text(type_name: str) -> str:
+    """Complete ``ros2idl`` definition of a type, in rosbag2's layout for IDL schemas.
+
+    The type's IDL first, then each type it uses once (depth first), each after an
+    80-character ``=`` line and a line ``IDL: <pkg/kind/Name>``; fields only (the
+    constants of a message do not enter its type hash nor its bytes).  Every name is
+    the full one (``pkg::srv::T_Request``), so a reader that hashes the text (rosbags'
+    AnyReader) gets the type's RIHS01 hash: ``ros2msg`` has no name for a service's
+    parts that rosbags keeps (it reads ``pkg/srv/T`` as ``pkg/srv/msg/T``).
+
+    Raises
+    ------
+    DefinitionNotFoundError
+        If a type's generated Python class cannot be imported.
+    """
+    root = normalise_type_name(type_name)
+    sections, seen = [], {root}
+
+    def append(full: str) -> None:
+        text, uses = _idl_struct(full)
+        sections.append(f'{SEPARATOR}\nIDL: {full}\n{text}')
+        for used in uses:
+            if used not in seen:
+                seen.add(used)
+                append(used)
+
+    append(root)
+    return ''.join(sections)
+
+
+def schema_of(type_name: str) -> tuple[str, str]:
+    """(MCAP schema encoding, definition text) the recorder writes for a type.
+
+    ``ros2idl`` (:func:`idl_definition_text`) for services' parts and events, whose
+    full names ``ros2msg`` readers do not keep; ``ros2msg`` (:func:`definition_text`)
+    for every other type.
+    """
+    if normalise_type_name(type_name).split('/')[1] in IDL_KINDS:
+        return 'ros2idl', idl_definition_text(type_name)
+    return 'ros2msg', definition_text(type_name)

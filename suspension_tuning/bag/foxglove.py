@@ -2,7 +2,8 @@
 
 ``tools/foxglove/check_bag.mjs`` reads each MCAP file with ``@mcap/core``, parses each
 ``ros2msg`` schema with ``@foxglove/rosmsg`` (``ros2: true``: dependency sections are
-found by exact name) and decodes every message with
+found by exact name) and each ``ros2idl`` one (a service's event) with
+``@foxglove/ros2idl-parser``, and decodes every message with
 ``@foxglove/rosmsg2-serialization``.  ``make setup`` installs those packages (pinned in
 ``tools/foxglove/package-lock.json``) into ``tools/foxglove/node_modules``.
 
@@ -38,6 +39,7 @@ NODE_MAJOR = 20
 PACKAGES = (
     '@mcap/core',
     '@foxglove/rosmsg',
+    '@foxglove/ros2idl-parser',
     '@foxglove/rosmsg2-serialization',
     '@foxglove/wasm-zstd',
     '@foxglove/wasm-lz4',

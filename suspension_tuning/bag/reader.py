@@ -274,10 +274,14 @@ def decode(contents: BagContents, message: BagMessage) -> Any:
     object
         An object whose attributes are the message's fields (mcap-ros2-support).
 
+    A ``ros2idl`` schema (a service's event) is decoded with the installed type's
+    ``ros2msg`` text (:func:`~suspension_tuning.bag.definitions.definition_text`):
+    mcap-ros2-support reads ``ros2msg`` only, and the bytes are those of that type.
+
     Raises
     ------
     ValueError
-        If the bag has no ``ros2msg`` definition for the message's type.
+        If the bag has no ``ros2msg`` or ``ros2idl`` definition for the message's type.
     """
     from mcap.records import Schema as SchemaRecord
     from mcap_ros2.decoder import DecoderFactory
@@ -285,12 +289,20 @@ def decode(contents: BagContents, message: BagMessage) -> Any:
     channel = next(c for c in contents.channels.values() if c.topic == message.topic)
     key = (channel.type, channel.definition)
     if key not in _DECODERS:
-        if channel.schema_encoding != 'ros2msg':
+        definition = channel.definition
+        if channel.schema_encoding == 'ros2idl':
+            from suspension_tuning.bag.definitions import DefinitionNotFoundError, definition_text
+            try:
+                definition = definition_text(channel.type)
+            except DefinitionNotFoundError as error:
+                raise ValueError(f'topic {message.topic}: ros2idl schema of a type not '
+                                 f'installed here ({error})') from None
+        elif channel.schema_encoding != 'ros2msg':
             raise ValueError(
                 f'topic {message.topic}: schema encoding '
-                f'{channel.schema_encoding!r} is not ros2msg'
+                f'{channel.schema_encoding!r} is not ros2msg or ros2idl'
             )
-        name, text = _rosidl_adapter_names(channel.type, channel.definition)
+        name, text = _rosidl_adapter_names(channel.type, definition)
         schema = SchemaRecord(id=1, name=name, encoding='ros2msg', data=text.encode())
         _DECODERS[key] = DecoderFactory().decoder_for('cdr', schema)
     return _DECODERS[key](message.data)
@@ -312,11 +324,8 @@ def _rosidl_adapter_names(type_name: str, definition: str) -> tuple[str, str]:
             continue
         fixed = name.replace('_', '')
         pattern = rf'(?<![\w/]){re.escape(package)}/(?:(msg|srv|action)/)?{re.escape(name)}(?!\w)'
-        definition = re.sub(
-            pattern,
-            lambda m, p=package, f=fixed: f'{p}/{m[1]}/{f}' if m[1] else f'{p}/{f}',
-            definition,
-        )
+        # two-part names in the text: its parser refuses pkg/action/T as a field type
+        definition = re.sub(pattern, lambda m, p=package, f=fixed: f'{p}/{f}', definition)
         if full == type_name:
             type_name = (
                 f'{package}/{full.split("/")[1]}/{fixed}'
@@ -377,6 +386,7 @@ def reindex(path: str | os.PathLike[str], output: str | os.PathLike[str] | None 
             channel.offered_qos_profiles,
             definition=definition,
             type_description_hash=channel.metadata.get('topic_type_hash', ''),
+            schema_encoding=channel.schema_encoding,
         )
     for name, data in contents.metadata.items():
         if name == 'rosbag2':

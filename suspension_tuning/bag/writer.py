@@ -3,8 +3,11 @@
 What it writes follows rosbag2's MCAP storage plugin (ros2/rosbag2
 ``rosbag2_storage_mcap/src/mcap_storage.cpp``, Jazzy; notes ros2-conventions B.3):
 
-* MCAP header profile ``ros2``; one schema per type, encoding ``ros2msg``, text from
-  :func:`suspension_tuning.bag.definitions.definition_text`; one channel per topic,
+* MCAP header profile ``ros2``; one schema per type, encoding ``ros2msg`` with the text
+  of :func:`suspension_tuning.bag.definitions.definition_text`, or for a service's event
+  and parts ``ros2idl`` (:func:`~suspension_tuning.bag.definitions.schema_of`): each
+  text names every type in full, so its RIHS01 hash is the channel's
+  ``topic_type_hash`` (rosbags' AnyReader checks it); one channel per topic,
   message encoding ``cdr``, channel metadata ``offered_qos_profiles`` (YAML string,
   bag version 9 names) and ``topic_type_hash`` (RIHS01);
 * messages as raw CDR bytes (never re-encoded), ``log_time`` = receive time,
@@ -35,7 +38,7 @@ from typing import Any
 import yaml
 from mcap.writer import CompressionType, Writer
 
-from suspension_tuning.bag.definitions import DefinitionNotFoundError, definition_text, type_hash
+from suspension_tuning.bag.definitions import DefinitionNotFoundError, schema_of, type_hash
 
 #: rosbag2 BagMetadata format version written (Jazzy writes 9: QoS with names).
 BAG_VERSION = 9
@@ -228,6 +231,7 @@ class BagWriter:
         offered_qos_profiles: Sequence[Mapping[str, Any]] = (),
         definition: str | None = None,
         type_description_hash: str | None = None,
+        schema_encoding: str = 'ros2msg',
     ) -> TopicInfo:
         """Register a topic (its schema once per type, and a ``cdr`` channel).
 
@@ -240,9 +244,13 @@ class BagWriter:
         offered_qos_profiles : sequence of dict
             The publishers' offered QoS (see :func:`qos_profile_dict`).
         definition : str, optional
-            ``ros2msg`` text; by default :func:`definition_text` of the type.
+            The schema's text, in ``schema_encoding``; by default
+            :func:`~suspension_tuning.bag.definitions.schema_of` the type (``ros2msg``,
+            or ``ros2idl`` for a service's event and parts).
         type_description_hash : str, optional
             RIHS01 hash; by default read from the installed interface description.
+        schema_encoding : str
+            Encoding of a given ``definition``: ``ros2msg`` or ``ros2idl``.
 
         Raises
         ------
@@ -259,9 +267,10 @@ class BagWriter:
                 )
             return self.topics[topic]
         if type_name not in self._schemas:
-            text = definition if definition is not None else definition_text(type_name)
+            encoding, text = ((schema_encoding, definition) if definition is not None
+                              else schema_of(type_name))
             self._schemas[type_name] = self._writer.register_schema(
-                name=type_name, encoding='ros2msg', data=text.encode()
+                name=type_name, encoding=encoding, data=text.encode()
             )
         if type_description_hash is None:
             try:

@@ -30,6 +30,7 @@ forked.  Where there is no forkserver (Windows) they are spawned.  No rclpy here
 from __future__ import annotations
 
 import collections
+import contextlib
 import math
 import multiprocessing
 import os
@@ -38,7 +39,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from multiprocessing import connection
 from pathlib import Path
@@ -235,6 +236,8 @@ class FmuProcessPool:
         self.path = str(fmu_path)
         self.mapping = mapping
         self.timeout_s = float(timeout_s)
+        #: What sets ``timeout_s``, named in the error of a run that exceeds it.
+        self.timeout_name = 'fmu_timeout_s'
         self.on_message = on_message
         self.designs_per_process = int(designs_per_process)
         self._context = _context()
@@ -457,7 +460,7 @@ class FmuProcessPool:
                 if child.state == 'busy' and now - child.sent > self.timeout_s:
                     failures[child.index] = (
                         f'{design_label(child.index, child.x)}: no result within '
-                        f'{self.timeout_s:g} s (fmu_timeout_s): the FMU hung '
+                        f'{self.timeout_s:g} s ({self.timeout_name}): the FMU hung '
                         f'{_when(child.t)}; its process was stopped.{_said(child.recent)}')
                     self._replace(child)
                 elif child.state == 'starting' and now - child.started > START_TIMEOUT_S:
@@ -577,6 +580,20 @@ class IsolatedFmuModel(FmuModel):
     def cancel(self) -> bool:
         """Stop the designs running now (their request fails as cancelled); False if none."""
         return self.pool.cancel()
+
+    @contextlib.contextmanager
+    def run_timeout(self, timeout_s: float, name: str) -> Iterator[None]:
+        """Within the block, a design may take ``timeout_s`` at most.
+
+        Not more than ``fmu_timeout_s``; the error of a design stopped names ``name``.
+        """
+        saved = self.pool.timeout_s, self.pool.timeout_name
+        if timeout_s < saved[0]:
+            self.pool.timeout_s, self.pool.timeout_name = float(timeout_s), name
+        try:
+            yield
+        finally:
+            self.pool.timeout_s, self.pool.timeout_name = saved
 
     def close(self) -> None:
         """Stop the child processes, then close as FmuModel."""

@@ -25,12 +25,13 @@ can be stopped.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shutil
 import tempfile
 import time
 import zipfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree
@@ -376,7 +377,17 @@ class FmuModel:
                                'unit right?')
         return out
 
-    def plausibility(self) -> tuple[dict[str, dict[str, float]], list[str]]:
+    @contextlib.contextmanager
+    def run_timeout(self, timeout_s: float, name: str) -> Iterator[None]:
+        """A shorter limit per design within the block: none in this process.
+
+        An FMU run in the worker's own process cannot be stopped; the isolated model's
+        (:class:`~suspension_tuning.fmu.isolated.IsolatedFmuModel`) can.
+        """
+        yield
+
+    def plausibility(self, budget_s: float | None = None
+                     ) -> tuple[dict[str, dict[str, float]], list[str]]:
         """One run of the centre design per scenario, and warnings where it looks wrong.
 
         The check for mapped variables whose unit the FMU does not declare: a unit off
@@ -386,6 +397,14 @@ class FmuModel:
         - Static load: the time mean of the four tyre forces, as a mass (N / g), against
           the mapping's ``vehicle_mass_kg`` (warned beyond ``STATIC_LOAD_TOLERANCE``).
         - Ride: each seat's BS 6841 W_b RMS against ``PLAUSIBLE_SEAT_RMS_MPS2``.
+
+        Parameters
+        ----------
+        budget_s : float, optional
+            Wall-clock time the runs may take in all, s (a run that hangs is stopped
+            when it is spent, and the scenarios left are not run: warnings say so).
+            Bounds the runs in child processes (:class:`~suspension_tuning.fmu.
+            isolated.IsolatedFmuModel`) only.
 
         Returns
         -------
@@ -398,10 +417,22 @@ class FmuModel:
         numbers: dict[str, dict[str, float]] = {}
         warnings: list[str] = self._start_value_warnings()
         mass = self.mapping.vehicle_mass_kg
+        deadline = None if budget_s is None else time.monotonic() + budget_s
         for name in self.mapping.scenarios:
             x = np.full((1, 2), 0.5)  # the centre of the design space (tune's default start)
+            left_s = None if deadline is None else deadline - time.monotonic()
+            if left_s is not None and left_s <= 0.0:
+                warnings.append(f'{name}: not run: the plausibility check\'s {budget_s:g} s '
+                                '(plausibility_timeout_s) were spent')
+                continue
             try:
-                result = self.evaluate(name, x)
+                if left_s is None:
+                    result = self.evaluate(name, x)
+                else:
+                    with self.run_timeout(max(0.1, round(left_s, 1)),  # 0.1 s: messages
+                                          'the plausibility check\'s limit, '
+                                          'plausibility_timeout_s'):
+                        result = self.evaluate(name, x)
             except (FmuRunError, ValueError) as error:
                 warnings.append(f'{name}: the run of the centre design failed ({error}); '
                                 'check the units of the design parameters')

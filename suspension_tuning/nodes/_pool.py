@@ -12,9 +12,13 @@ go out one at a time to whichever worker is free, the one idle longest first: a 
 host takes fewer pieces, and a one-design request does not always land on the same
 worker.  A piece whose worker is lost (liveliness), vanishes or stays silent longer
 than ``design_timeout_s`` per design is sent again to another worker; that worker is
-used again once it is back (a new model description, or its liveliness regained and
-the next goal's :meth:`SimulationPool.check_models`).  A design gives the same bits
-alone or in a batch, so how the pieces fall does not change a result.
+used again once it is back: its liveliness regained, a model description from a new
+process (one restarted under its name, also within the liveliness lease, when its loss
+was never reported), or an answer to a ping (a lost worker whose ``evaluate`` is
+matched is pinged: DDS may not report the liveliness of a process continued after a
+stop longer than its participant lease).  "back" is said once per return.  A design
+gives the same bits alone or in a batch, so how the pieces fall does not change a
+result.
 
 A worker gets pieces only once it has answered a ping (an ``evaluate`` request with
 no scenario and no designs) since it joined, came back or failed.  A worker process
@@ -124,6 +128,8 @@ class Worker:
     failed: str = ''  #: why it is not used until it is back ('' = not failed)
     refused: str = ''  #: why its model is not the pool's ('' = not refused)
     ready: bool = False  #: answered a ping since it joined, came back or failed
+    model_stamp: int | None = None  #: source time stamp of its model description, ns
+    back_reported: bool = False  #: 'back' said since its process's model description
     ping: Any = None  #: the future of the ping in flight
     ping_sent_s: float = 0.0
     ping_wait_s: float = PING_RETRY_S[0]
@@ -218,8 +224,18 @@ class SimulationPool:
                 self._ping(worker)
 
     def _ping(self, worker: Worker) -> None:
-        """Ping a worker that is up but not ready (again, once the last ping is overdue)."""
-        if worker.ready or not self._up(worker):
+        """Ping a worker that is not ready (again, once the last ping is overdue).
+
+        A worker that is up gets pinged before its first piece; one that was lost (its
+        liveliness) but whose ``evaluate`` is matched gets pinged too: an answer shows
+        that it runs again (a process continued after a stop, or restarted under its
+        name, whose liveliness DDS may not report again), and takes it back.  A worker
+        that failed otherwise (hung, a failed call) is used again at the next goal
+        (:meth:`revive`).
+        """
+        if worker.ready or worker.model is None:
+            return
+        if not (self._up(worker) or (worker.gone and worker.client.service_is_ready())):
             return
         now = time.monotonic()
         if worker.ping is not None:
@@ -232,11 +248,24 @@ class SimulationPool:
         future.add_done_callback(lambda done: self._on_pong(worker, done))
 
     def _on_pong(self, worker: Worker, future: Any) -> None:
+        event = None
         with self._news:
             if future is worker.ping and future.exception() is None:
                 worker.ready, worker.ping = True, None
                 worker.ping_wait_s = PING_RETRY_S[0]
+                event = self._back(worker, ' (it answers again)')
                 self._news.notify_all()
+        if event is not None:
+            self._event(*event, worker.name)
+
+    def _back(self, worker: Worker, how: str) -> tuple[str, str] | None:
+        """Take a lost or failed worker back: the 'back' event, once per return."""
+        out = worker.gone or bool(worker.failed)
+        worker.gone, worker.failed, worker.alive = False, '', True
+        if not out:
+            return None
+        worker.back_reported = True
+        return ('back', f'worker {worker.name} is back{how}')
 
     def _not_ready(self, worker: Worker) -> None:
         """The worker must answer a ping before it gets a piece again."""
@@ -250,7 +279,7 @@ class SimulationPool:
         cancel = self.node.create_client(Trigger, f'{name}/cancel', callback_group=self.group)
         self.workers[name] = Worker(name, client, cancel)
         self.node.create_subscription(
-            String, f'{name}/model', lambda msg: self._on_model(name, msg),
+            String, f'{name}/model', lambda msg, info: self._on_model(name, msg, info),
             model_qos(self.loss_timeout_s), callback_group=self.group,
             event_callbacks=SubscriptionEventCallbacks(
                 liveliness=lambda info: self._on_liveliness(name, info),
@@ -266,15 +295,35 @@ class SimulationPool:
         if self.on_event is not None:
             self.on_event(event)
 
-    def _on_model(self, name: str, msg: String) -> None:
+    def _on_model(self, name: str, msg: String, info: Any = None) -> None:
+        """A worker's model description: it joined, or a process restarted under its name.
+
+        A description with a new source time stamp comes from a new process (each one
+        publishes it once, latched); the same one again is the old sample delivered
+        anew (e.g. after the graph forgot a stopped process).  A new process is back
+        even when its loss went unnoticed (restarted within the liveliness lease), and
+        must answer a ping before it gets a piece: the old one's calls are lost.
+        """
         events = []
+        stamp = info.get('source_timestamp') if isinstance(info, dict) else None
         with self._news:
             arrived = time.monotonic()  # taken under the lock: before check_models sees it
             worker = self.workers[name]
-            first, worker.model, worker.alive = worker.model is None, description(msg.data), True
-            if worker.failed or worker.gone:  # a restarted process describes its model again
-                worker.failed, worker.gone = '', False  # not ready since it failed or went
-                events.append(('back', f'worker {name} is back (model {worker.fingerprint})'))
+            first = worker.model is None
+            restarted = not first and stamp is not None and stamp != worker.model_stamp
+            worker.model, worker.alive = description(msg.data), True
+            if restarted:
+                worker.model_stamp = stamp
+                self._not_ready(worker)
+                if not worker.back_reported:  # a loss and return said it already
+                    worker.failed = worker.failed or 'restarted'
+                worker.back_reported = False
+            elif first:
+                worker.model_stamp = stamp
+            back = self._back(worker, f' (model {worker.fingerprint})')
+            if back is not None:
+                events.append(back)
+                worker.back_reported = not restarted
             elif first:
                 events.append(('joined', f'worker {name} joined (model {worker.fingerprint})'))
             worker.refused = ''
@@ -296,10 +345,8 @@ class SimulationPool:
         with self._news:
             worker = self.workers[name]
             if info.alive_count > 0:
+                event = self._back(worker, '') if worker.gone else None
                 worker.alive = True
-                if worker.gone:
-                    worker.gone, worker.failed = False, ''
-                    event = ('back', f'worker {name} is back')
                 self._ping(worker)
             elif worker.alive and not self._in_this_process(name):
                 worker.alive, worker.gone = False, True

@@ -236,19 +236,26 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
         The refusal also suggests another node name (a simulation worker).
 
     A parameter value the node cannot use (:class:`~suspension_tuning.nodes._parameters.
-    ParameterError`) ends the process with its one-line message and exit code 2.
+    ParameterError`) or a configuration file it cannot use (:class:`~suspension_tuning.
+    config_check.ConfigError`) ends the process with its one-line message and exit code 2.
     """
+    from suspension_tuning.config_check import ConfigError, check_params_files
     from suspension_tuning.nodes._parameters import ParameterError
     from suspension_tuning.nodes._unique import require_unique, start_check
 
+    try:  # before rcl parses them: a syntax error there ends in its traceback
+        check_params_files(sys.argv if args is None else list(args))
+    except ConfigError as error:
+        print(f'{name or "node"}: not started: {error}', file=sys.stderr)
+        sys.exit(2)
     rclpy.init(args=args)
     if name is not None and not require_unique(name, start_check(name, [name]), rename):
         return  # Ctrl-C or SIGTERM during the check
     try:
         node = make_node()
-    except ParameterError as error:
+    except (ParameterError, ConfigError) as error:
         rclpy.try_shutdown()
-        print(f'not started: {error}', file=sys.stderr)
+        print(f'{name or "node"}: not started: {error}', file=sys.stderr)
         sys.exit(2)
     except KeyboardInterrupt:  # Ctrl-C while the node is made
         settle_signal()

@@ -54,6 +54,7 @@ from suspension_tuning_interfaces.msg import (
 )
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
+from suspension_tuning.config_check import ConfigError, check_config
 from suspension_tuning.evaluation import scenarios as evaluation_scenarios
 from suspension_tuning.nodes._parameters import declare_numbers, read_only
 from suspension_tuning.nodes._pool import PoolEvent, pool_from_parameters
@@ -209,6 +210,21 @@ def set_metrics(message: Optimise.Result, scenario: str,
                 if values else [])
 
 
+def config_first(text: str) -> str:
+    """A goal's failure, led by the configuration's own line when a file is at fault.
+
+    A worker that meets a configuration file it cannot use reports it inside its
+    service error ("calibration failed: full-model samples failed: config/...");
+    :func:`~suspension_tuning.config_check.check_config` on this host names the file
+    and key first, the worker's text follows.
+    """
+    try:
+        check_config(builtin_model=False)
+    except ConfigError as error:
+        return f'configuration: {error} ({text})'
+    return text
+
+
 class CoordinatorNode(Node):
     """Action server ``optimise`` over the simulation workers and gradient evaluator.
 
@@ -223,6 +239,7 @@ class CoordinatorNode(Node):
     EXECUTOR = MultiThreadedExecutor
 
     def __init__(self, **kwargs) -> None:
+        check_config(builtin_model=False)  # ConfigError: one line, before the node exists
         super().__init__('coordinator', **kwargs)
         self.declare_parameter('gradient_node', '/gradient_evaluator')
         declare_numbers(self, {'call_timeout_s': 600.0, 'calibration_samples': 16,
@@ -566,9 +583,10 @@ class CoordinatorNode(Node):
                                           publish_telemetry=True, integrator=goal.integrator,
                                           road=goal.road)[0]
         except (ValueError, ServiceCallError) as error:
-            self.get_logger().error(f'evaluation failed: {error}')
+            text = config_first(f'evaluation failed: {error}')
+            self.get_logger().error(text)
             goal_handle.abort()
-            message = Optimise.Result(success=False, message=f'evaluation failed: {error}',
+            message = Optimise.Result(success=False, message=text,
                                       model_fingerprint=fingerprint,
                                       wall_time_s=time.monotonic() - t0)
             self.result_pub.publish(result_topic_message(message))
@@ -598,6 +616,14 @@ class CoordinatorNode(Node):
 
     def _optimise(self, goal_handle) -> Optimise.Result:
         t0 = time.monotonic()
+        try:  # a file edited since the start: its own line, before any worker fails on it
+            check_config(builtin_model=False)
+        except ConfigError as error:
+            self.get_logger().error(f'goal refused: {error}')
+            goal_handle.abort()
+            message = Optimise.Result(success=False, message=f'configuration: {error}')
+            self.result_pub.publish(message)
+            return message
         if goal_handle.request.gradient_source == EVALUATE:
             return self._evaluate_run(goal_handle, t0)
         try:
@@ -654,9 +680,9 @@ class CoordinatorNode(Node):
                 goal_handle.canceled()
                 text = 'cancelled'
             else:
-                self.get_logger().error(f'optimisation failed: {error}')
+                text = str(error) if self.stopping else config_first(str(error))
+                self.get_logger().error(f'optimisation failed: {text}')
                 goal_handle.abort()
-                text = str(error)
             message = Optimise.Result(success=False, message=text, history=history_msgs,
                                       wall_time_s=time.monotonic() - t0,
                                       model_fingerprint=fingerprint, **counter.as_dict())

@@ -74,6 +74,7 @@ from suspension_tuning_interfaces.msg import TimeHistories, ValveState, VehicleS
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
 from suspension_tuning import evaluation, simplified_inputs, telemetry
+from suspension_tuning.config_check import ConfigError, check_config
 from suspension_tuning.fmu import FmuConfigError, MappingError, worker_model
 from suspension_tuning.fmu.fmi_log import FmuMessage
 from suspension_tuning.fmu.isolated import DEFAULT_TIMEOUT_S, FmuRunCancelledError
@@ -100,6 +101,13 @@ TELEMETRY = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
 #: would hold a worker for minutes after its caller gave up (a ride design takes ~0.05 s
 #: here: 5,000 take 4 minutes).
 MAX_DESIGNS_PER_REQUEST = 128
+
+#: Wall-clock time the FMU start-up plausibility check may take in all, s (parameter
+#: ``plausibility_timeout_s``; runs in child processes): the bound on the time a worker
+#: is unreachable at start because of it (docs/fmu.md).  An estimate: an FMU whose
+#: centre runs take longer gets its check cut short with a warning naming the
+#: parameter, and serves all the same (raise it for a slow FMU).
+PLAUSIBILITY_TIMEOUT_S = 120.0
 
 
 class TopicValveController:
@@ -164,11 +172,17 @@ class FullVehicleSimNode(Node):
         # mapped variable; always; never), docs/fmu.md
         self.declare_parameter('plausibility_check', 'auto')
         self.declare_parameter('fmu_isolation', 'process')
+        try:  # the configuration files, before they are used (ConfigError: one line)
+            check_config(builtin_model=str(self.get_parameter('model').value) == 'builtin')
+        except ConfigError:
+            Node.destroy_node(self)
+            raise
         # full-model integrator when a request names none (config/vehicle.yaml default)
         self.declare_parameter('integrator', load_vehicle_params().integrator.method)
         try:  # before anything else: a bad FMU set-up leaves nothing half-started
             declare_numbers(self, {'telemetry_decimation': 2, 'closed_loop_timeout_s': 5.0,
                                    'fmu_timeout_s': DEFAULT_TIMEOUT_S, 'fmu_processes': 1,
+                                   'plausibility_timeout_s': PLAUSIBILITY_TIMEOUT_S,
                                    'liveliness_lease_s': 0.5,
                                    'max_designs_per_request': MAX_DESIGNS_PER_REQUEST,
                                    'telemetry_rate': 0.0})
@@ -237,7 +251,17 @@ class FullVehicleSimNode(Node):
             log.info('units the FMU does not declare: ' + '; '.join(self.fmu.undeclared_units))
         if mode == 'never' or (mode == 'auto' and not self.fmu.undeclared_units):
             return
-        numbers, warnings = self.fmu.plausibility()
+        # Said before the runs: the worker (and a graph starting it) answers nothing
+        # until they end, at most this long when they run in child processes.
+        budget_s = min(float(self.get_parameter('plausibility_timeout_s').value),
+                       float(self.get_parameter('fmu_timeout_s').value))
+        scenarios = ', '.join(self.fmu.mapping.scenarios)
+        isolated = str(self.get_parameter('fmu_isolation').value) == 'process'
+        log.info(f'plausibility check: one run of the centre design in {scenarios}, '
+                 + (f'at most {budget_s:g} s in all (plausibility_timeout_s, fmu_timeout_s)'
+                    if isolated else 'not bounded (fmu_isolation none)')
+                 + '; the worker serves once it ends')
+        numbers, warnings = self.fmu.plausibility(budget_s if isolated else None)
         log.info('plausibility check (centre design): ' + ', '.join(
             f'{scenario} ' + ', '.join(f'{k} {v:.3g}' for k, v in found.items())
             for scenario, found in numbers.items()))
@@ -386,7 +410,7 @@ def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning full_vehicle_sim``."""
     try:
         run_node(FullVehicleSimNode, args, name='full_vehicle_sim', rename=True)
-    except (FmuConfigError, MappingError) as error:  # ParameterError: run_node
+    except (FmuConfigError, MappingError) as error:  # ParameterError, ConfigError: run_node
         import rclpy
         rclpy.try_shutdown()
         print(f'full_vehicle_sim: not started: {error}', file=sys.stderr)

@@ -37,6 +37,7 @@ from suspension_tuning_interfaces.msg import CalibrationProgress
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning import simplified_inputs
+from suspension_tuning.config_check import check_config
 from suspension_tuning.model_identity import ModelMismatchError
 from suspension_tuning.nodes._parameters import declare_numbers, read_only
 from suspension_tuning.nodes._pool import pool_from_parameters
@@ -66,6 +67,7 @@ class GradientEvaluatorNode(Node):
     EXECUTOR = MultiThreadedExecutor
 
     def __init__(self, **kwargs) -> None:
+        check_config(builtin_model=False)  # ConfigError: one line, before the node exists
         super().__init__('gradient_evaluator', **kwargs)
         self.declare_parameter('calibration_dir', '')
         declare_numbers(self, {'default_samples': 16, 'default_step': 0.025})

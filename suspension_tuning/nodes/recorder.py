@@ -43,6 +43,7 @@ from suspension_tuning.bag.definitions import (
 )
 from suspension_tuning.bag.recorder import RecordingSession
 from suspension_tuning.bag.writer import qos_profile_dict
+from suspension_tuning.config_check import check_config
 from suspension_tuning.nodes._parameters import declare_numbers, read_only
 from suspension_tuning.nodes._spin import run_node
 
@@ -102,6 +103,7 @@ class RecorderNode(Node):
     """Subscribe to every (selected) topic raw and record it."""
 
     def __init__(self, **kwargs) -> None:
+        check_config(builtin_model=False)  # ConfigError: one line, before the node exists
         super().__init__('recorder', **kwargs)
         string_array = ParameterDescriptor(type=ParameterType.PARAMETER_STRING_ARRAY)
         self.declare_parameter('output_dir', 'bags')

@@ -19,6 +19,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from suspension_tuning_interfaces.msg import ValveState, VehicleState
 
+from suspension_tuning.config_check import check_config
 from suspension_tuning.nodes._parameters import declare_numbers, read_only
 from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.vehicle.valve_logic import ValveController, ValveControllerParams
@@ -41,6 +42,7 @@ class ValveControllerNode(Node):
     """Topic adapter over :class:`ValveController`."""
 
     def __init__(self, **kwargs) -> None:
+        check_config(builtin_model=False)  # ConfigError: one line, before the node exists
         super().__init__('valve_controller', **kwargs)
         defaults = asdict(ValveControllerParams())
         declare_numbers(self, {field.name: float(defaults[field.name])

@@ -59,6 +59,7 @@ import re
 import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy import ndimage
@@ -251,6 +252,72 @@ def _check_crg_units(path: Path) -> None:
                                'metres')
 
 
+def crg_header_values(path: str | Path) -> dict[str, float]:
+    """The numeric entries of an OpenCRG header's ``$ROAD_CRG`` block, by key.
+
+    Also the ``U:`` channel's start and increment (keys ``U_start``, ``U_increment``).
+    """
+    values: dict[str, float] = {}
+    block = ''
+    for line in _crg_header_lines(Path(path)):
+        text = line.split('!', 1)[0].strip()
+        if text.startswith('$'):
+            block = text[1:].strip().upper()
+            continue
+        if block == 'ROAD_CRG' and '=' in text:
+            key, _, value = text.partition('=')
+            try:
+                values[key.strip().lower()] = float(value.strip())
+            except ValueError:
+                continue
+        elif text.startswith('U:'):
+            parts = [part.strip() for part in text[2:].split(',')]
+            for key, part in zip(('U_start', 'U_increment'), parts[2:4]):
+                try:
+                    values[key] = float(part)
+                except ValueError:
+                    continue
+    return values
+
+
+def _check_crg_header_against_data(path: Path, road: Any) -> None:
+    """Refuse an OpenCRG file whose header and data disagree (rows, length, increments).
+
+    The ``$ROAD_CRG`` block's reference line from ``reference_line_start_u`` to
+    ``reference_line_end_u`` in steps of ``reference_line_increment`` gives the number
+    of data rows (cross sections); ``long_section_v_right`` to ``long_section_v_left``
+    in steps of ``long_section_v_increment`` the number of long sections.  A file cut
+    short (e.g. after 500 of 1001 rows) has fewer rows than its header says.
+    """
+    h = crg_header_values(path)
+    inc = h.get('reference_line_increment')
+    if inc is not None and 'U_increment' in h and not np.isclose(inc, h['U_increment'],
+                                                                  rtol=1e-9, atol=0.0):
+        raise _error(path, f'reference_line_increment {inc:g} m in the header, but the U: '
+                           f"channel's increment is {h['U_increment']:g} m")
+    inc = inc if inc is not None else h.get('U_increment')
+    start = h.get('reference_line_start_u', h.get('U_start'))
+    end = h.get('reference_line_end_u')
+    rows = int(road.nu)
+    if inc is not None and start is not None and end is not None and inc > 0:
+        expected = int(round((end - start) / inc)) + 1
+        if expected != rows:
+            raise _error(path, f'the header (reference_line_start_u {start:g} to '
+                               f'reference_line_end_u {end:g} m, reference_line_increment '
+                               f'{inc:g} m) gives {expected} data rows, {end - start:g} m; '
+                               f'the data has {rows} rows, {(rows - 1) * inc:g} m: a '
+                               'truncated or damaged file')
+    keys = ('long_section_v_right', 'long_section_v_left', 'long_section_v_increment')
+    if all(key in h for key in keys) and h[keys[2]] > 0:
+        right, left, v_inc = (h[key] for key in keys)
+        expected = int(round((left - right) / v_inc)) + 1
+        if expected != int(road.nv):
+            raise _error(path, f'the header (long_section_v_right {right:g} to '
+                               f'long_section_v_left {left:g} m, long_section_v_increment '
+                               f'{v_inc:g} m) gives {expected} long sections; the data has '
+                               f'{int(road.nv)}: a damaged file')
+
+
 def read_crg_tracks(path: str | Path, track_m: float) -> RoadTracks:
     """Read the wheel tracks at +-track/2 from the reference line of an OpenCRG file.
 
@@ -280,8 +347,8 @@ def read_crg_tracks(path: str | Path, track_m: float) -> RoadTracks:
         raise _error(path, 'no such file')
     _check_crg_units(path)
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter('ignore', ResourceWarning)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter('always')
             road = pyopencrg.read(str(path), apply_mods=False, check=True)
             if road.mods is not None:  # the file's own modifiers, as a simulator applies them
                 road = road.apply_mods()
@@ -289,6 +356,11 @@ def read_crg_tracks(path: str | Path, track_m: float) -> RoadTracks:
         text = str(error).replace(str(path) + ': ', '').replace(str(path), '').strip()
         text = text.split('\nTo open it anyway')[0].strip()
         raise _error(path, f'not a readable OpenCRG road: {text}') from None
+    _check_crg_header_against_data(path, road)  # before PyOpenCRG's warnings about it
+    for warning in caught:
+        if not issubclass(warning.category, ResourceWarning):
+            warnings.warn_explicit(warning.message, warning.category, warning.filename,
+                                   warning.lineno)
     v = np.asarray(road.v, dtype=float)
     z = np.asarray(road.z, dtype=float)
     half = 0.5 * float(track_m)

@@ -1,6 +1,7 @@
 // Decode every message of MCAP files the way Foxglove does, with Foxglove's own libraries:
 // @mcap/core reads the records (CRCs checked), @foxglove/rosmsg parses each `ros2msg`
-// schema with `ros2: true` (dependency names matched exactly), and
+// schema with `ros2: true` (dependency names matched exactly), @foxglove/ros2idl-parser
+// each `ros2idl` one, and
 // @foxglove/rosmsg2-serialization's MessageReader decodes each message's CDR.
 //
 // Usage: node check_bag.mjs [--messages] FILE.mcap [FILE.mcap ...]
@@ -16,6 +17,7 @@ import { readFileSync } from "node:fs";
 import { createRequire } from "node:module";
 
 import { McapStreamReader } from "@mcap/core";
+import { parseRos2idl } from "@foxglove/ros2idl-parser";
 import { parse } from "@foxglove/rosmsg";
 import { MessageReader } from "@foxglove/rosmsg2-serialization";
 
@@ -76,12 +78,19 @@ function checkFile(path, withMessages) {
         entry.decoded_messages = [];
       }
       try {
-        if (schema?.encoding !== "ros2msg" || record.messageEncoding !== "cdr") {
+        const encoding = schema?.encoding;
+        if ((encoding !== "ros2msg" && encoding !== "ros2idl") || record.messageEncoding !== "cdr") {
           throw new Error(
-            `not ros2msg/cdr: ${schema?.encoding ?? "no schema"}/${record.messageEncoding}`,
+            `not ros2msg or ros2idl/cdr: ${encoding ?? "no schema"}/${record.messageEncoding}`,
           );
         }
-        const definitions = parse(new TextDecoder().decode(schema.data), { ros2: true });
+        const text = new TextDecoder().decode(schema.data);
+        let definitions;
+        if (encoding === "ros2msg") {
+          definitions = parse(text, { ros2: true });
+        } else {
+          definitions = parseRos2idl(text); // in the text's order: the root type first
+        }
         entry.reader = new MessageReader(definitions);
       } catch (error) {
         entry.error = `schema: ${error.message}`;
