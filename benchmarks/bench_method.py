@@ -138,6 +138,15 @@ def print_case(out: dict[str, Any], suffix: str, reference: mb.Reference) -> Non
     print(f'ride4_calibration_runs{suffix}: {out["calibration_runs"]}')
     print(f'ride4_calibration_wall_s{suffix}: {out["calibration_wall_s"]:.1f}')
     print(f'ride4_max_final_violation{suffix}: {s["max_final_violation"]:.3g}')
+    print(f'ride4_paid_full_runs_per_start{suffix}: '
+          f'{[runs_to_solve(r.paid_full_runs) for r in ours]}')
+    print(f'ride4_paid_full_runs{suffix}: {runs_to_solve(s["median_paid_full_runs"])}')
+    print(f'ride4_stop_tests{suffix}: {[r.stop_test for r in ours]}')
+    print(f'ride4_runs_stopped_by_test{suffix}: '
+          f'{sum(r.stop_test not in ("maxiter", "cancelled") for r in ours)}')
+    print(f'ride4_check_max_violation{suffix}: '
+          f'{[round(r.check_max_violation, 4) for r in ours]}')
+    print(f'ride4_starts_solved{suffix}_checked: {s["starts_solved_checked"]}')
     if noisy:
         print(f'ride4_max_final_violation_noisy_fixed_step: '
               f'{s["max_final_violation_fixed_step"]:.3g}')
@@ -152,6 +161,8 @@ def print_case(out: dict[str, Any], suffix: str, reference: mb.Reference) -> Non
         print(f'{method}_median_full_runs{suffix}: {runs_to_solve(m["median_full_runs"])}')
         print(f'{method}_median_gap_pct{suffix}: {m["median_gap_pct"]:.3f}')
         print(f'{method}_max_gap_pct{suffix}: {m["max_gap_pct"]:.3f}')
+        print(f'{method}_paid_full_runs{suffix}: '
+              f'{[runs_to_solve(r.paid_full_runs) for r in rs]}')
         print(f'{method}_wall_s{suffix}: {sum(r.wall_time_s for r in rs):.1f}')
     lower = [(r.f_fixed_step, r) for rs in out['results'].values() for r in rs
              if r.max_violation_fixed_step <= mb.REPORT_GTOL and r.f_fixed_step < reference.f]
@@ -194,6 +205,17 @@ def print_peers(out: dict[str, Any], noisy: bool) -> None:
     print(f'peer_best_ride4{tag}: {p["best_peer"]}')
     print(f'peer_best_full_runs_ride4{tag}: {runs_to_solve(p["peer_best_full_runs"])}')
     print(f'full_runs_ratio_vs_best_peer{tag}: {p["full_runs_ratio_vs_best_peer"]:.2f}')
+    for peer, median in p['peer_paid_medians'].items():
+        print(f'peer_median_paid_full_runs_{peer}{tag}: {runs_to_solve(median)}')
+    print(f'peer_best_paid_ride4{tag}: {p["best_paid_peer"]}')
+    print(f'peer_best_paid_full_runs_ride4{tag}: {runs_to_solve(p["peer_best_paid_full_runs"])}')
+    print(f'paid_ratio_vs_best_peer{tag}: {p["paid_ratio_vs_best_peer"]:.2f}')
+    results = out['results']
+    for who, method in (('ours', 'dq_simplified'), ('best_peer', p['best_paid_peer'])):
+        cal = out['calibration_runs'] if method == 'dq_simplified' else 0
+        for workers in mb.ROUND_WORKERS:
+            median = float(np.median([mb.rounds(r, workers, cal) for r in results[method]]))
+            print(f'ride4_rounds_p{workers}_{who}{tag}: {runs_to_solve(median)}')
     print(f'full_runs_ratio_vs_best_peer_with_calibration{tag}: '
           f'{p["full_runs_ratio_vs_best_peer_with_calibration"]:.2f}')
 

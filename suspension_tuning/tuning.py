@@ -443,7 +443,9 @@ def optimise(request: TuningRequest, full_model: FullModel,
     def staircase(m: int) -> list[bool]:
         return [True] * (m - len(extra_staircase)) + extra_staircase
 
-    opt = DynamicQ(request.start, lower, upper, request.options, history=history,
+    opt = DynamicQ(request.start, lower, upper,
+                   with_noise_levels(request.options, request.scenario, request.integrator),
+                   history=history,
                    gradient_source=request.gradient_source,
                    surrogate_rule_constraints=staircase)
     correction_options = CorrectionOptions.from_mapping(request.correction)
@@ -513,6 +515,36 @@ def optimise(request: TuningRequest, full_model: FullModel,
     result.update(correction=correction.summary() if correction is not None
                   else {'method': 'none'})
     return result
+
+
+def noise_levels(scenario: str, integrator: str = '') -> tuple[float, float]:
+    """Noise levels (f, g) of the built-in full model (config/optimiser.yaml
+    ``noise_levels``); (0, 0) for a scenario or integrator without an entry.
+    """  # noqa: D205
+    from suspension_tuning.paths import config_dir, read_yaml
+
+    if not integrator:
+        from suspension_tuning.vehicle.params import load_vehicle_params
+
+        integrator = load_vehicle_params().integrator.method
+    levels = read_yaml(config_dir() / 'optimiser.yaml').get('noise_levels', {})
+    entry = levels.get(scenario, {}).get(integrator)
+    if not entry:
+        return 0.0, 0.0
+    return float(entry['f']), float(entry['g'])
+
+
+def with_noise_levels(options: Mapping[str, Any] | None, scenario: str,
+                      integrator: str = '') -> dict[str, Any]:
+    """Dynamic-Q options with ``noise_f`` and ``noise_g`` of the model filled in.
+
+    Options that set either to a positive value keep theirs; else (unset or both 0,
+    the defaults) :func:`noise_levels` gives them.
+    """
+    out = DynamicQOptions.from_mapping(options).as_dict()
+    if out['noise_f'] <= 0.0 and out['noise_g'] <= 0.0:
+        out['noise_f'], out['noise_g'] = noise_levels(scenario, integrator)
+    return out
 
 
 class _ConstraintTerms:

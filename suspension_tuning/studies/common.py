@@ -410,6 +410,7 @@ def run_dynamic_q(
         details={'optimiser_options': options, 'fd_step': FD_STEP,
                  **model_details(integrator),
                  'best_iteration': design.iteration, 'best_feasible': design.feasible,
+                 'stop_test': str(result.get('stop_test', '')),
                  'x_last': np.asarray(result.x, float).tolist(), 'f_last': float(result.f),
                  'max_violation_last': max_violation(result.g)},  # fmt: skip
     )
