@@ -111,6 +111,11 @@ TARGETS = {  # [-] the benchmark's targets (module docstring)
     'ride4_max_final_violation': 0.005,
     'ride4_median_gap_pct_noisy': 1.0,
     'ride4_max_gap_pct_noisy': 2.0,
+    'paid_ratio_vs_best_peer': 1.5,
+    'paid_ratio_vs_best_peer_noisy': 5.0,
+    'ride4_runs_stopped_by_test_noisy': 5,
+    'ride4_starts_solved_noisy_checked': 6,
+    'paid_ratio_min_small_cases': 1.0,
 }
 
 
@@ -220,6 +225,37 @@ def print_peers(out: dict[str, Any], noisy: bool) -> None:
           f'{p["full_runs_ratio_vs_best_peer_with_calibration"]:.2f}')
 
 
+SMALL_CASES = (('ride', 2), ('handling', 2), ('handling', 4))
+
+
+def small_cases(jobs: int) -> None:
+    """Paid full runs of ours and of every peer on the smaller cases (fixed step)."""
+    ratios = []
+    for scenario, n_vars in SMALL_CASES:
+        key = f'{scenario}{n_vars}'
+        reference = mb.reference_for(scenario, n_vars)
+        out = mb.run_benchmark(scenario, n_vars, mb.REFERENCE_INTEGRATOR, reference,
+                               {'slsqp': SLSQP_EPS}, peers=PEERS, stop_when_solved=True,
+                               jobs=jobs)
+        ours = out['results']['dq_simplified']
+        s = out['summaries']['dq_simplified']
+        p = out['peers']
+        print(f'{key}_calibration_runs: {out["calibration_runs"]}')
+        print(f'{key}_starts_solved: {s["starts_solved"]}')
+        print(f'{key}_full_runs_to_solve: {[runs_to_solve(r.full_runs_to_solve) for r in ours]}')
+        print(f'{key}_paid_full_runs_per_start: '
+              f'{[runs_to_solve(r.paid_full_runs) for r in ours]}')
+        print(f'{key}_paid_full_runs: {runs_to_solve(s["median_paid_full_runs"])}')
+        print(f'{key}_stop_tests: {[r.stop_test for r in ours]}')
+        for peer, median in p['peer_paid_medians'].items():
+            print(f'{key}_peer_median_paid_full_runs_{peer}: {runs_to_solve(median)}')
+        print(f'{key}_peer_best_paid: {p["best_paid_peer"]}')
+        print(f'{key}_peer_best_paid_full_runs: {runs_to_solve(p["peer_best_paid_full_runs"])}')
+        print(f'{key}_paid_ratio_vs_best_peer: {p["paid_ratio_vs_best_peer"]:.2f}')
+        ratios.append(p['paid_ratio_vs_best_peer'])
+    print(f'paid_ratio_min_small_cases: {min(ratios):.2f}')
+
+
 def default_jobs() -> int:
     """2 worker processes when the machine is otherwise idle, else 1."""
     return 2 if (os.cpu_count() or 1) >= 2 and os.getloadavg()[0] < 0.5 else 1
@@ -229,6 +265,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--jobs', type=int, default=None,
                         help="worker processes for the peers' runs (default: see above)")
+    parser.add_argument('--part', choices=('all', 'fixed', 'noisy', 'small'), default='all',
+                        help='run one part only (the parts are independent: three '
+                             'processes can run them side by side)')
     args = parser.parse_args()
     jobs = default_jobs() if args.jobs is None else max(1, args.jobs)
     install_study_extra()
@@ -246,6 +285,20 @@ def main() -> None:
         print(f'ride4_start_point_{label}: {np.round(x0, 4).tolist()}')
 
     peers = dict(peers=PEERS, stop_when_solved=True, jobs=jobs)
+    if args.part in ('all', 'small'):
+        small_cases(jobs)
+        print(f'bench_method_small_cases_wall_s: {time.perf_counter() - t0:.1f}')
+    if args.part in ('all', 'fixed'):
+        run_fixed(reference, starts, peers, t0)
+    if args.part in ('all', 'noisy'):
+        run_noisy(reference, starts, peers)
+    for name, target in TARGETS.items():
+        print(f'target_{name}: {target}')
+    print(f'bench_method_wall_s: {time.perf_counter() - t0:.1f}')
+
+
+def run_fixed(reference: mb.Reference, starts: list, peers: dict, t0: float) -> None:
+    """The 4-variable ride on the fixed-step model."""
     fixed = mb.run_benchmark(SCENARIO, N_VARS, mb.REFERENCE_INTEGRATOR, reference,
                              {'slsqp': SLSQP_EPS}, starts=starts, **peers)
     print_case(fixed, '', reference)
@@ -253,6 +306,9 @@ def main() -> None:
     print_peers(fixed, noisy=False)
     print(f'bench_method_fixed_step_wall_s: {time.perf_counter() - t0:.1f}')
 
+
+def run_noisy(reference: mb.Reference, starts: list, peers: dict) -> None:
+    """The 4-variable ride on the noisy (variable-step) model."""
     est = noise_optimal_fd_step(SCENARIO, N_VARS, NOISY)
     print(f'noisy_fd_step_more_wild: {est["step"]:.4f}')
     print(f'noisy_fd_step_search_full_runs: {est["full_runs"]}')
@@ -265,9 +321,6 @@ def main() -> None:
     print_peers(noisy, noisy=True)
     print(f'slsqp_default_gap_pct_noisy: '
           f'{noisy["summaries"]["slsqp"]["max_gap_pct"]:.3f}')
-    for name, target in TARGETS.items():
-        print(f'target_{name}: {target}')
-    print(f'bench_method_wall_s: {time.perf_counter() - t0:.1f}')
 
 
 if __name__ == '__main__':

@@ -5,8 +5,9 @@ default, the built-in variable-step model at Adams' 1e-3) decides feasibility wi
 integrator's bias: on the 4-variable ride the tyre-hop constraints of the noisy model's
 optimum are about 0.015 lower than the converged solution's (docs/noise_study.md).
 :func:`check_design` runs the reported design once more by Dormand-Prince 5(4) at the
-tightened tolerance of config/vehicle.yaml ``integration.check`` (same output grid), and
-:func:`check_verdict` compares the two verdicts.  The run counts as a paid full run.
+tightened tolerance of config/vehicle.yaml ``integration.check`` (same output grid);
+:func:`suspension_tuning.tuning.check_summary` gives the two verdicts.  The run counts
+as a paid full run.
 An FMU is checked by the tolerance of FMI's ``setupExperiment`` where the FMU supports
 it; this module serves the built-in model.
 """
@@ -15,7 +16,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -25,10 +25,16 @@ from suspension_tuning.paths import config_dir, read_yaml
 
 @dataclass(frozen=True)
 class CheckSettings:
-    """Tolerances of the check run (config/vehicle.yaml ``integration.check``)."""
+    """Settings of the check run (config/vehicle.yaml ``integration.check``).
+
+    ``rtol``, ``atol``: DOPRI5's error tolerances; ``gtol``: the check's feasibility
+    tolerance on g; ``continuations``: shifted continuations at most.
+    """
 
     rtol: float
     atol: float
+    gtol: float = 5e-3
+    continuations: int = 2
 
     def __post_init__(self) -> None:
         """Positive, finite tolerances (ValueError naming the setting)."""
@@ -45,7 +51,8 @@ def load_check_settings(path: str | Path | None = None) -> CheckSettings:
     check = d['integration'].get('check')
     if check is None:
         raise ValueError('config/vehicle.yaml has no integration.check (rtol, atol)')
-    return CheckSettings(float(check['rtol']), float(check['atol']))
+    return CheckSettings(float(check['rtol']), float(check['atol']),
+                         float(check.get('gtol', 5e-3)), int(check.get('continuations', 2)))
 
 
 def check_design(scenario: str, n_vars: int, x: ArrayLike,
@@ -60,20 +67,3 @@ def check_design(scenario: str, n_vars: int, x: ArrayLike,
     res = run_scenario(scenario, np.asarray(x, float)[None, :], params=params, n_vars=n_vars,
                        integrator='variable_step')
     return float(res.f[0]), np.asarray(res.g[0], float).copy()
-
-
-def check_verdict(g_run: ArrayLike, g_check: ArrayLike, gtol: float) -> dict[str, Any]:
-    """Both feasibility verdicts and the offset of the check's g over the run's.
-
-    Returns
-    -------
-    dict
-        ``feasible_run``, ``feasible_check`` (max g <= gtol each), ``max_violation_check``
-        and ``offset`` (g_check - g_run per constraint, the shift an engineer would put
-        on the constraints to continue).
-    """
-    g_run, g_check = np.asarray(g_run, float), np.asarray(g_check, float)
-    viol = float(max(0.0, np.max(g_check))) if g_check.size else 0.0
-    return {'feasible_run': bool(g_run.size == 0 or np.max(g_run) <= gtol),
-            'feasible_check': bool(viol <= gtol), 'max_violation_check': viol,
-            'offset': (g_check - g_run).tolist()}
