@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -67,3 +68,25 @@ def check_design(scenario: str, n_vars: int, x: ArrayLike,
     res = run_scenario(scenario, np.asarray(x, float)[None, :], params=params, n_vars=n_vars,
                        integrator='variable_step')
     return float(res.f[0]), np.asarray(res.g[0], float).copy()
+
+
+def check_options(scenario: str, n_vars: int, settings: CheckSettings | None = None
+                  ) -> dict[str, Any]:
+    """``tuning.optimise``'s check arguments for the built-in model of a scenario.
+
+    ``check_model`` (designs (1, n) -> ``FullEvaluation`` at the tighter tolerance),
+    ``check_gtol`` and ``check_continuations`` (config/vehicle.yaml ``integration.check``):
+    what the coordinator passes for the built-in model, and an in-process run that
+    must reach the same bits.
+    """
+    from suspension_tuning.tuning import FullEvaluation
+
+    settings = load_check_settings() if settings is None else settings
+
+    def model(designs: ArrayLike) -> FullEvaluation:
+        f, g = check_design(scenario, n_vars, np.atleast_2d(np.asarray(designs, float))[0],
+                            settings)
+        return FullEvaluation(np.array([f]), g[None, :])
+
+    return {'check_model': model, 'check_gtol': settings.gtol,
+            'check_continuations': settings.continuations}

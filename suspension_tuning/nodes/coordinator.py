@@ -660,16 +660,14 @@ class CoordinatorNode(Node):
                     gradients[scenario] = self._simplified_gradient(request, scenario)
             models = {name: self._full_model(request, name)
                       for name in request.constraint_scenarios}
-            check_model, note, settings = self._check_model(request, fingerprint)
-            if check_model is not None:  # the built-in model: its noise levels too
+            checking, note = self._check_options(request, fingerprint)
+            if checking['check_model'] is not None:  # the built-in model: its noise levels
                 request = dataclasses.replace(request, options=with_noise_levels(
                     request.options, request.scenario, request.integrator))
             result = optimise(request, self._full_model(request),
                               self._simplified_gradient(request), on_iteration,
                               counter=counter, constraint_models=models,
-                              constraint_gradients=gradients, check_model=check_model,
-                              check_gtol=settings.gtol,
-                              check_continuations=settings.continuations)
+                              constraint_gradients=gradients, **checking)
         except (ValueError, ServiceCallError) as error:
             if self._cancel_requested():  # e.g. during the calibration
                 self.get_logger().info(f'goal cancelled ({error})')
@@ -714,39 +712,31 @@ class CoordinatorNode(Node):
         self.result_pub.publish(message)
         return message
 
-    def _check_model(self, request: TuningRequest, fingerprint: str) -> tuple[Any, str, Any]:
-        """The built-in model at the tighter tolerance, in this process, or why none.
+    def _check_options(self, request: TuningRequest, fingerprint: str
+                       ) -> tuple[dict[str, Any], str]:
+        """``optimise``'s check arguments: the built-in model at the tighter tolerance, in
+        this process, or none and why.
 
         The workers' model must be the built-in one on the configured road (an FMU's
         tolerance would go through FMI's setupExperiment, which the workers do not
-        take per goal yet).  Returns (model or None, note, settings).
-        """
-        from suspension_tuning.answer_check import (
-            CheckSettings,
-            check_design,
-            load_check_settings,
-        )
+        take per goal).  Returns (arguments, note).
+        """  # noqa: D205
+        from suspension_tuning.answer_check import check_options
         from suspension_tuning.model_identity import builtin_fingerprint
         from suspension_tuning.studies.common import integrator_name
 
+        none = {'check_model': None, 'check_gtol': 5e-3, 'check_continuations': 0}
         try:
-            settings = load_check_settings()
+            options = check_options(request.scenario, request.n_vars)
         except (ValueError, KeyError, OSError) as error:
-            return None, f'not checked: {error}', CheckSettings(1e-6, 1e-6)
+            return none, f'not checked: {error}'
         if request.road:
-            return None, 'not checked: a goal road (the check runs the configured road)', \
-                settings
+            return none, 'not checked: a goal road (the check runs the configured road)'
         if fingerprint != builtin_fingerprint(integrator_name(request.integrator or None)):
-            return None, ("not checked: the workers' model is not the built-in one (an FMU "
+            return none, ("not checked: the workers' model is not the built-in one (an FMU "
                           "is checked only where its setupExperiment tolerance can be set, "
-                          "which the workers do not do per goal)"), settings
-
-        def model(designs: Any) -> FullEvaluation:
-            f, g = check_design(request.scenario, request.n_vars,
-                                np.asarray(designs, float)[0], settings)
-            return FullEvaluation(np.array([f]), g[None, :])
-
-        return model, '', settings
+                          "which the workers do not do per goal)")
+        return options, ''
 
     def _stopped(self) -> bool:
         """Stop waiting for services: the node shuts down, or the goal is cancelled."""

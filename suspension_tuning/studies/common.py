@@ -389,20 +389,14 @@ def run_dynamic_q(
     t0 = time.perf_counter()
     models = {name: full_model(name, n_vars, integrator)
               for name in request.constraint_scenarios}
-    check_model = None
-    from suspension_tuning.answer_check import check_design, load_check_settings
+    from suspension_tuning.answer_check import check_options
 
-    settings = load_check_settings()
-    if check:
-        def check_model(designs: Array) -> FullEvaluation:
-            f, g = check_design(scenario, n_vars, np.asarray(designs, float)[0], settings)
-            return FullEvaluation(np.array([f]), g[None, :])
+    checking = check_options(scenario, n_vars) if check else {}
 
     result = optimise(
         request, full_model(scenario, n_vars, integrator), gradient, on_iteration,
         counter=counter, constraint_models=models, constraint_gradients=constraint_gradients,
-        check_model=check_model, check_gtol=settings.gtol,
-        check_continuations=settings.continuations,
+        **checking,
     )
     verdict = result.get('check')
     if verdict and verdict.get('continued'):
