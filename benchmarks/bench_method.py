@@ -10,10 +10,13 @@ same 6 starts of the 4-variable ride (eq. 9 with the eq. 11 tyre-hop constraints
 'baseline' (dpsf 1, 0.3 L), 'centre' of the design space and 4 seeded Latin-hypercube
 points ``0.001 + 0.999 * scipy.stats.qmc.LatinHypercube(d=4, seed=7).random(4)``:
 
-* ours: Dynamic-Q with eq. 25-scaled simplified-model gradients and the first-order
-  correction (``common.run_dynamic_q(..., 'simplified', ...)``), after one calibration
-  of 16 full-model samples (``optim.simplified_gradient.calibrate``) on the same
-  integrator as the runs, done once per model and shared by the starts;
+* ours: Dynamic-Q with simplified-model gradients and the first-order correction
+  (``common.run_dynamic_q(..., 'simplified', ..., check=True)``), with the noise test of
+  the built-in model's noise levels (config/optimiser.yaml ``noise_levels``) and the
+  answer checked at DOPRI5 1e-6 after the stop (continued with shifted constraints when
+  the check finds it infeasible; ``suspension_tuning.answer_check``).  Its eq. 25
+  calibration: ``method_benchmark.BENCH_CALIBRATION_SAMPLES`` (none on the ride, the 4
+  corners on handling; docs/corrected_gradients.md);
 * Dynamic-Q with full-model central differences (``common.run_dynamic_q(..., 'full')``);
 * SciPy SLSQP with its default 2-point forward differences (step 1.49e-8).  On the
   noisy model also with More & Wild's noise-optimal step
@@ -52,6 +55,24 @@ Definitions (``suspension_tuning.studies.method_benchmark``):
   reported design is solved, ``inf`` if no record's is; calibration excluded.
   ``..._median_full_runs`` is the median over the 6 starts (``inf`` when 3 or more of
   them are not reached).
+* **Paid full runs** (``method_benchmark.paid_full_runs``): every full run of a method
+  until it stops by itself, the calibration and the check of the answer included,
+  counted for a start only when its final answer is solved, else ``inf`` (not
+  reached); the median over the starts.  The peers run to their own stop within the
+  300-run budget; Optuna TPE has no stop of its own and pays its budget (its run stops
+  at its first solved design, which the budget's answer equals or betters).
+  ``paid_ratio_vs_best_peer``: the smallest peer median over ours.
+  ``ride4_runs_stopped_by_test``: ours' runs ended by a test of their own (xtol, ftol,
+  noise, rho_min), not by the iteration limit; ``ride4_stop_tests`` names them.
+  ``ride4_starts_solved_noisy_checked``: solved with g of the check at the tighter
+  tolerance (which stands in for the fixed-step model).
+* **Rounds** (``method_benchmark.rounds``): sequential full-run rounds with a pool of
+  P = 1, 4, 16 workers: the calibration's samples P at a time, every other paid run one
+  round (Dynamic-Q, COBYLA and COBYQA are sequential; NOMAD and Optuna ran here one
+  evaluation at a time).  Ours and the best paid peer's, median over the starts.
+* **Smaller cases** (``--part small``): ours and every peer from the same 6 starts on the
+  2-variable ride and both handling cases, fixed step; ``paid_ratio_min_small_cases`` is
+  the smallest of their ``paid_ratio_vs_best_peer``.
 * **Ratios**: ``full_runs_ratio_vs_slsqp`` and ``full_runs_ratio_vs_dq_full``: median
   full runs to solve of the other method over ours; ``..._with_calibration``: over
   ours plus the 16 calibration runs.  A ratio whose numerator is not reached (the
@@ -81,7 +102,8 @@ late or never, take most of the peers' share.
 The peers' runs go to ``--jobs`` worker processes (default: 2 when the machine is
 otherwise idle, 1-minute load average below 0.5, else 1; the figures do not depend on it).
 
-Run: .venv/bin/python benchmarks/bench_method.py [--jobs N]
+Run: .venv/bin/python benchmarks/bench_method.py [--jobs N] [--part all|small|fixed|noisy]
+(the three parts are independent; three processes can run them side by side).
 """
 
 from __future__ import annotations
