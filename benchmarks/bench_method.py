@@ -250,15 +250,14 @@ def print_peers(out: dict[str, Any], noisy: bool) -> None:
 SMALL_CASES = (('ride', 2), ('handling', 2), ('handling', 4))
 
 
-def small_cases(jobs: int) -> None:
+def small_cases(peers: dict) -> None:
     """Paid full runs of ours and of every peer on the smaller cases (fixed step)."""
     ratios = []
     for scenario, n_vars in SMALL_CASES:
         key = f'{scenario}{n_vars}'
         reference = mb.reference_for(scenario, n_vars)
         out = mb.run_benchmark(scenario, n_vars, mb.REFERENCE_INTEGRATOR, reference,
-                               {'slsqp': SLSQP_EPS}, peers=PEERS, stop_when_solved=True,
-                               jobs=jobs)
+                               {'slsqp': SLSQP_EPS}, **peers)
         ours = out['results']['dq_simplified']
         s = out['summaries']['dq_simplified']
         p = out['peers']
@@ -290,6 +289,11 @@ def main() -> None:
     parser.add_argument('--part', choices=('all', 'fixed', 'noisy', 'small'), default='all',
                         help='run one part only (the parts are independent: three '
                              'processes can run them side by side)')
+    parser.add_argument('--peers', default=','.join(PEERS),
+                        help='comma-separated peers to run (default: all)')
+    parser.add_argument('--no-baselines', action='store_true',
+                        help='leave out Dynamic-Q with full-model gradients and SLSQP '
+                             '(their ratios are then not printed)')
     args = parser.parse_args()
     jobs = default_jobs() if args.jobs is None else max(1, args.jobs)
     install_study_extra()
@@ -306,9 +310,16 @@ def main() -> None:
     for label, x0 in starts:
         print(f'ride4_start_point_{label}: {np.round(x0, 4).tolist()}')
 
-    peers = dict(peers=PEERS, stop_when_solved=True, jobs=jobs)
+    chosen = tuple(p for p in args.peers.split(',') if p)
+    for peer in chosen:
+        if peer not in PEERS:
+            parser.error(f'unknown peer {peer!r}; valid: {", ".join(PEERS)}')
+    baselines = not args.no_baselines
+    print(f'bench_method_peers: {",".join(chosen)}')
+    print(f'bench_method_baselines: {baselines}')
+    peers = dict(peers=chosen, stop_when_solved=True, jobs=jobs, baselines=baselines)
     if args.part in ('all', 'small'):
-        small_cases(jobs)
+        small_cases(peers)
         print(f'bench_method_small_cases_wall_s: {time.perf_counter() - t0:.1f}')
     if args.part in ('all', 'fixed'):
         run_fixed(reference, starts, peers, t0)
@@ -324,25 +335,30 @@ def run_fixed(reference: mb.Reference, starts: list, peers: dict, t0: float) -> 
     fixed = mb.run_benchmark(SCENARIO, N_VARS, mb.REFERENCE_INTEGRATOR, reference,
                              {'slsqp': SLSQP_EPS}, starts=starts, **peers)
     print_case(fixed, '', reference)
-    print_ratios(fixed, noisy=False)
+    if peers['baselines']:
+        print_ratios(fixed, noisy=False)
     print_peers(fixed, noisy=False)
     print(f'bench_method_fixed_step_wall_s: {time.perf_counter() - t0:.1f}')
 
 
 def run_noisy(reference: mb.Reference, starts: list, peers: dict) -> None:
     """The 4-variable ride on the noisy (variable-step) model."""
-    est = noise_optimal_fd_step(SCENARIO, N_VARS, NOISY)
-    print(f'noisy_fd_step_more_wild: {est["step"]:.4f}')
-    print(f'noisy_fd_step_search_full_runs: {est["full_runs"]}')
-    noisy = mb.run_benchmark(SCENARIO, N_VARS, NOISY, reference,
-                             {'slsqp': SLSQP_EPS, 'slsqp_best_fd': est['step']}, starts=starts,
+    steps = {'slsqp': SLSQP_EPS}
+    if peers['baselines']:
+        est = noise_optimal_fd_step(SCENARIO, N_VARS, NOISY)
+        print(f'noisy_fd_step_more_wild: {est["step"]:.4f}')
+        print(f'noisy_fd_step_search_full_runs: {est["full_runs"]}')
+        steps['slsqp_best_fd'] = est['step']
+    noisy = mb.run_benchmark(SCENARIO, N_VARS, NOISY, reference, steps, starts=starts,
                              **peers)
     print_case(noisy, '_noisy', reference)
-    print(f'noisy_best_slsqp_variant: {noisy["slsqp"]}')
-    print_ratios(noisy, noisy=True)
+    if peers['baselines']:
+        print(f'noisy_best_slsqp_variant: {noisy["slsqp"]}')
+        print_ratios(noisy, noisy=True)
     print_peers(noisy, noisy=True)
-    print(f'slsqp_default_gap_pct_noisy: '
-          f'{noisy["summaries"]["slsqp"]["max_gap_pct"]:.3f}')
+    if peers['baselines']:
+        print(f'slsqp_default_gap_pct_noisy: '
+              f'{noisy["summaries"]["slsqp"]["max_gap_pct"]:.3f}')
 
 
 if __name__ == '__main__':

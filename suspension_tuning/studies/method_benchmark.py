@@ -745,7 +745,8 @@ def run_benchmark(scenario: str, n_vars: int, integrator: str, reference: Refere
                   starts: Sequence[tuple[str, Array]] | None = None,
                   log: Callable[[str], None] | None = None,
                   peers: Sequence[str] = (), budget: int = PEER_BUDGET,
-                  stop_when_solved: bool = False, jobs: int = 1) -> dict[str, Any]:
+                  stop_when_solved: bool = False, jobs: int = 1,
+                  baselines: bool = True) -> dict[str, Any]:
     """Every method from every start on one model, judged against the reference.
 
     Dynamic-Q with simplified gradients (one eq. 25 calibration of
@@ -756,7 +757,8 @@ def run_benchmark(scenario: str, n_vars: int, integrator: str, reference: Refere
     budget; ``stop_when_solved`` ends a peer's run at its first solved design.  With
     ``jobs`` > 1 the peers' runs go to that many worker processes while this one runs
     the rest (the figures do not depend on it: every method and model is
-    deterministic, Optuna's sampler seeded).
+    deterministic, Optuna's sampler seeded).  ``baselines`` False leaves out Dynamic-Q
+    with full-model gradients and SLSQP (no ``ratios``, ``slsqp`` None).
 
     Returns
     -------
@@ -794,8 +796,12 @@ def run_benchmark(scenario: str, n_vars: int, integrator: str, reference: Refere
         'dq_simplified': run_starts('dq_simplified', scenario, n_vars, reference, integrator,
                                     gradient=gradient, calibration_samples=calibration_samples,
                                     **shared),
-        'dq_full': run_starts('dq_full', scenario, n_vars, reference, integrator, **shared),
     }
+    if not baselines:
+        slsqp_steps = {}
+    else:
+        results['dq_full'] = run_starts('dq_full', scenario, n_vars, reference, integrator,
+                                        **shared)
     for name, eps in slsqp_steps.items():
         results[name] = run_starts(name, scenario, n_vars, reference, integrator, eps=eps,
                                    budget=budget, **shared)
@@ -812,11 +818,12 @@ def run_benchmark(scenario: str, n_vars: int, integrator: str, reference: Refere
                                        **shared)
     if pool is not None:
         pool.shutdown()
-    slsqp = pick_slsqp_variant({name: results[name] for name in slsqp_steps})
+    slsqp = pick_slsqp_variant({name: results[name] for name in slsqp_steps}) \
+        if slsqp_steps else None
     summaries = {name: summary(rs) for name, rs in results.items()}
     ours = summaries['dq_simplified']['median_full_runs']
     ratios = {}
-    for label, other in (('slsqp', slsqp), ('dq_full', 'dq_full')):
+    for label, other in ((('slsqp', slsqp), ('dq_full', 'dq_full')) if baselines else ()):
         theirs = summaries[other]['median_full_runs']
         ratios[f'full_runs_ratio_vs_{label}'] = run_ratio(theirs, ours)
         ratios[f'full_runs_ratio_vs_{label}_with_calibration'] = run_ratio(
