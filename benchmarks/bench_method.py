@@ -10,10 +10,13 @@ same 6 starts of the 4-variable ride (eq. 9 with the eq. 11 tyre-hop constraints
 'baseline' (dpsf 1, 0.3 L), 'centre' of the design space and 4 seeded Latin-hypercube
 points ``0.001 + 0.999 * scipy.stats.qmc.LatinHypercube(d=4, seed=7).random(4)``:
 
-* ours: Dynamic-Q with eq. 25-scaled simplified-model gradients and the first-order
-  correction (``common.run_dynamic_q(..., 'simplified', ...)``), after one calibration
-  of 16 full-model samples (``optim.simplified_gradient.calibrate``) on the same
-  integrator as the runs, done once per model and shared by the starts;
+* ours: Dynamic-Q with simplified-model gradients and the first-order correction
+  (``common.run_dynamic_q(..., 'simplified', ..., check=True)``), with the noise test of
+  the built-in model's noise levels (config/optimiser.yaml ``noise_levels``) and the
+  answer checked at DOPRI5 1e-6 after the stop (continued with shifted constraints when
+  the check finds it infeasible; ``suspension_tuning.answer_check``).  Its eq. 25
+  calibration: ``method_benchmark.BENCH_CALIBRATION_SAMPLES`` (none on the ride, the 4
+  corners on handling; docs/corrected_gradients.md);
 * Dynamic-Q with full-model central differences (``common.run_dynamic_q(..., 'full')``);
 * SciPy SLSQP with its default 2-point forward differences (step 1.49e-8).  On the
   noisy model also with More & Wild's noise-optimal step
@@ -52,6 +55,24 @@ Definitions (``suspension_tuning.studies.method_benchmark``):
   reported design is solved, ``inf`` if no record's is; calibration excluded.
   ``..._median_full_runs`` is the median over the 6 starts (``inf`` when 3 or more of
   them are not reached).
+* **Paid full runs** (``method_benchmark.paid_full_runs``): every full run of a method
+  until it stops by itself, the calibration and the check of the answer included,
+  counted for a start only when its final answer is solved, else ``inf`` (not
+  reached); the median over the starts.  The peers run to their own stop within the
+  300-run budget; Optuna TPE has no stop of its own and pays its budget (its run stops
+  at its first solved design, which the budget's answer equals or betters).
+  ``paid_ratio_vs_best_peer``: the smallest peer median over ours.
+  ``ride4_runs_stopped_by_test``: ours' runs ended by a test of their own (xtol, ftol,
+  noise, rho_min), not by the iteration limit; ``ride4_stop_tests`` names them.
+  ``ride4_starts_solved_noisy_checked``: solved with g of the check at the tighter
+  tolerance (which stands in for the fixed-step model).
+* **Rounds** (``method_benchmark.rounds``): sequential full-run rounds with a pool of
+  P = 1, 4, 16 workers: the calibration's samples P at a time, every other paid run one
+  round (Dynamic-Q, COBYLA and COBYQA are sequential; NOMAD and Optuna ran here one
+  evaluation at a time).  Ours and the best paid peer's, median over the starts.
+* **Smaller cases** (``--part small``): ours and every peer from the same 6 starts on the
+  2-variable ride and both handling cases, fixed step; ``paid_ratio_min_small_cases`` is
+  the smallest of their ``paid_ratio_vs_best_peer``.
 * **Ratios**: ``full_runs_ratio_vs_slsqp`` and ``full_runs_ratio_vs_dq_full``: median
   full runs to solve of the other method over ours; ``..._with_calibration``: over
   ours plus the 16 calibration runs.  A ratio whose numerator is not reached (the
@@ -81,7 +102,8 @@ late or never, take most of the peers' share.
 The peers' runs go to ``--jobs`` worker processes (default: 2 when the machine is
 otherwise idle, 1-minute load average below 0.5, else 1; the figures do not depend on it).
 
-Run: .venv/bin/python benchmarks/bench_method.py [--jobs N]
+Run: .venv/bin/python benchmarks/bench_method.py [--jobs N] [--part all|small|fixed|noisy]
+(the three parts are independent; three processes can run them side by side).
 """
 
 from __future__ import annotations
@@ -111,6 +133,11 @@ TARGETS = {  # [-] the benchmark's targets (module docstring)
     'ride4_max_final_violation': 0.005,
     'ride4_median_gap_pct_noisy': 1.0,
     'ride4_max_gap_pct_noisy': 2.0,
+    'paid_ratio_vs_best_peer': 1.5,
+    'paid_ratio_vs_best_peer_noisy': 5.0,
+    'ride4_runs_stopped_by_test_noisy': 5,
+    'ride4_starts_solved_noisy_checked': 6,
+    'paid_ratio_min_small_cases': 1.0,
 }
 
 
@@ -138,6 +165,15 @@ def print_case(out: dict[str, Any], suffix: str, reference: mb.Reference) -> Non
     print(f'ride4_calibration_runs{suffix}: {out["calibration_runs"]}')
     print(f'ride4_calibration_wall_s{suffix}: {out["calibration_wall_s"]:.1f}')
     print(f'ride4_max_final_violation{suffix}: {s["max_final_violation"]:.3g}')
+    print(f'ride4_paid_full_runs_per_start{suffix}: '
+          f'{[runs_to_solve(r.paid_full_runs) for r in ours]}')
+    print(f'ride4_paid_full_runs{suffix}: {runs_to_solve(s["median_paid_full_runs"])}')
+    print(f'ride4_stop_tests{suffix}: {[r.stop_test for r in ours]}')
+    print(f'ride4_runs_stopped_by_test{suffix}: '
+          f'{sum(r.stop_test not in ("maxiter", "cancelled") for r in ours)}')
+    print(f'ride4_check_max_violation{suffix}: '
+          f'{[round(r.check_max_violation, 4) for r in ours]}')
+    print(f'ride4_starts_solved{suffix}_checked: {s["starts_solved_checked"]}')
     if noisy:
         print(f'ride4_max_final_violation_noisy_fixed_step: '
               f'{s["max_final_violation_fixed_step"]:.3g}')
@@ -152,6 +188,8 @@ def print_case(out: dict[str, Any], suffix: str, reference: mb.Reference) -> Non
         print(f'{method}_median_full_runs{suffix}: {runs_to_solve(m["median_full_runs"])}')
         print(f'{method}_median_gap_pct{suffix}: {m["median_gap_pct"]:.3f}')
         print(f'{method}_max_gap_pct{suffix}: {m["max_gap_pct"]:.3f}')
+        print(f'{method}_paid_full_runs{suffix}: '
+              f'{[runs_to_solve(r.paid_full_runs) for r in rs]}')
         print(f'{method}_wall_s{suffix}: {sum(r.wall_time_s for r in rs):.1f}')
     lower = [(r.f_fixed_step, r) for rs in out['results'].values() for r in rs
              if r.max_violation_fixed_step <= mb.REPORT_GTOL and r.f_fixed_step < reference.f]
@@ -194,8 +232,49 @@ def print_peers(out: dict[str, Any], noisy: bool) -> None:
     print(f'peer_best_ride4{tag}: {p["best_peer"]}')
     print(f'peer_best_full_runs_ride4{tag}: {runs_to_solve(p["peer_best_full_runs"])}')
     print(f'full_runs_ratio_vs_best_peer{tag}: {p["full_runs_ratio_vs_best_peer"]:.2f}')
+    for peer, median in p['peer_paid_medians'].items():
+        print(f'peer_median_paid_full_runs_{peer}{tag}: {runs_to_solve(median)}')
+    print(f'peer_best_paid_ride4{tag}: {p["best_paid_peer"]}')
+    print(f'peer_best_paid_full_runs_ride4{tag}: {runs_to_solve(p["peer_best_paid_full_runs"])}')
+    print(f'paid_ratio_vs_best_peer{tag}: {p["paid_ratio_vs_best_peer"]:.2f}')
+    results = out['results']
+    for who, method in (('ours', 'dq_simplified'), ('best_peer', p['best_paid_peer'])):
+        cal = out['calibration_runs'] if method == 'dq_simplified' else 0
+        for workers in mb.ROUND_WORKERS:
+            median = float(np.median([mb.rounds(r, workers, cal) for r in results[method]]))
+            print(f'ride4_rounds_p{workers}_{who}{tag}: {runs_to_solve(median)}')
     print(f'full_runs_ratio_vs_best_peer_with_calibration{tag}: '
           f'{p["full_runs_ratio_vs_best_peer_with_calibration"]:.2f}')
+
+
+SMALL_CASES = (('ride', 2), ('handling', 2), ('handling', 4))
+
+
+def small_cases(peers: dict) -> None:
+    """Paid full runs of ours and of every peer on the smaller cases (fixed step)."""
+    ratios = []
+    for scenario, n_vars in SMALL_CASES:
+        key = f'{scenario}{n_vars}'
+        reference = mb.reference_for(scenario, n_vars)
+        out = mb.run_benchmark(scenario, n_vars, mb.REFERENCE_INTEGRATOR, reference,
+                               {'slsqp': SLSQP_EPS}, **peers)
+        ours = out['results']['dq_simplified']
+        s = out['summaries']['dq_simplified']
+        p = out['peers']
+        print(f'{key}_calibration_runs: {out["calibration_runs"]}')
+        print(f'{key}_starts_solved: {s["starts_solved"]}')
+        print(f'{key}_full_runs_to_solve: {[runs_to_solve(r.full_runs_to_solve) for r in ours]}')
+        print(f'{key}_paid_full_runs_per_start: '
+              f'{[runs_to_solve(r.paid_full_runs) for r in ours]}')
+        print(f'{key}_paid_full_runs: {runs_to_solve(s["median_paid_full_runs"])}')
+        print(f'{key}_stop_tests: {[r.stop_test for r in ours]}')
+        for peer, median in p['peer_paid_medians'].items():
+            print(f'{key}_peer_median_paid_full_runs_{peer}: {runs_to_solve(median)}')
+        print(f'{key}_peer_best_paid: {p["best_paid_peer"]}')
+        print(f'{key}_peer_best_paid_full_runs: {runs_to_solve(p["peer_best_paid_full_runs"])}')
+        print(f'{key}_paid_ratio_vs_best_peer: {p["paid_ratio_vs_best_peer"]:.2f}')
+        ratios.append(p['paid_ratio_vs_best_peer'])
+    print(f'paid_ratio_min_small_cases: {min(ratios):.2f}')
 
 
 def default_jobs() -> int:
@@ -207,6 +286,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--jobs', type=int, default=None,
                         help="worker processes for the peers' runs (default: see above)")
+    parser.add_argument('--part', choices=('all', 'fixed', 'noisy', 'small'), default='all',
+                        help='run one part only (the parts are independent: three '
+                             'processes can run them side by side)')
+    parser.add_argument('--peers', default=','.join(PEERS),
+                        help='comma-separated peers to run (default: all)')
+    parser.add_argument('--no-baselines', action='store_true',
+                        help='leave out Dynamic-Q with full-model gradients and SLSQP '
+                             '(their ratios are then not printed)')
     args = parser.parse_args()
     jobs = default_jobs() if args.jobs is None else max(1, args.jobs)
     install_study_extra()
@@ -223,29 +310,55 @@ def main() -> None:
     for label, x0 in starts:
         print(f'ride4_start_point_{label}: {np.round(x0, 4).tolist()}')
 
-    peers = dict(peers=PEERS, stop_when_solved=True, jobs=jobs)
-    fixed = mb.run_benchmark(SCENARIO, N_VARS, mb.REFERENCE_INTEGRATOR, reference,
-                             {'slsqp': SLSQP_EPS}, starts=starts, **peers)
-    print_case(fixed, '', reference)
-    print_ratios(fixed, noisy=False)
-    print_peers(fixed, noisy=False)
-    print(f'bench_method_fixed_step_wall_s: {time.perf_counter() - t0:.1f}')
-
-    est = noise_optimal_fd_step(SCENARIO, N_VARS, NOISY)
-    print(f'noisy_fd_step_more_wild: {est["step"]:.4f}')
-    print(f'noisy_fd_step_search_full_runs: {est["full_runs"]}')
-    noisy = mb.run_benchmark(SCENARIO, N_VARS, NOISY, reference,
-                             {'slsqp': SLSQP_EPS, 'slsqp_best_fd': est['step']}, starts=starts,
-                             **peers)
-    print_case(noisy, '_noisy', reference)
-    print(f'noisy_best_slsqp_variant: {noisy["slsqp"]}')
-    print_ratios(noisy, noisy=True)
-    print_peers(noisy, noisy=True)
-    print(f'slsqp_default_gap_pct_noisy: '
-          f'{noisy["summaries"]["slsqp"]["max_gap_pct"]:.3f}')
+    chosen = tuple(p for p in args.peers.split(',') if p)
+    for peer in chosen:
+        if peer not in PEERS:
+            parser.error(f'unknown peer {peer!r}; valid: {", ".join(PEERS)}')
+    baselines = not args.no_baselines
+    print(f'bench_method_peers: {",".join(chosen)}')
+    print(f'bench_method_baselines: {baselines}')
+    peers = dict(peers=chosen, stop_when_solved=True, jobs=jobs, baselines=baselines)
+    if args.part in ('all', 'small'):
+        small_cases(peers)
+        print(f'bench_method_small_cases_wall_s: {time.perf_counter() - t0:.1f}')
+    if args.part in ('all', 'fixed'):
+        run_fixed(reference, starts, peers, t0)
+    if args.part in ('all', 'noisy'):
+        run_noisy(reference, starts, peers)
     for name, target in TARGETS.items():
         print(f'target_{name}: {target}')
     print(f'bench_method_wall_s: {time.perf_counter() - t0:.1f}')
+
+
+def run_fixed(reference: mb.Reference, starts: list, peers: dict, t0: float) -> None:
+    """The 4-variable ride on the fixed-step model."""
+    fixed = mb.run_benchmark(SCENARIO, N_VARS, mb.REFERENCE_INTEGRATOR, reference,
+                             {'slsqp': SLSQP_EPS}, starts=starts, **peers)
+    print_case(fixed, '', reference)
+    if peers['baselines']:
+        print_ratios(fixed, noisy=False)
+    print_peers(fixed, noisy=False)
+    print(f'bench_method_fixed_step_wall_s: {time.perf_counter() - t0:.1f}')
+
+
+def run_noisy(reference: mb.Reference, starts: list, peers: dict) -> None:
+    """The 4-variable ride on the noisy (variable-step) model."""
+    steps = {'slsqp': SLSQP_EPS}
+    if peers['baselines']:
+        est = noise_optimal_fd_step(SCENARIO, N_VARS, NOISY)
+        print(f'noisy_fd_step_more_wild: {est["step"]:.4f}')
+        print(f'noisy_fd_step_search_full_runs: {est["full_runs"]}')
+        steps['slsqp_best_fd'] = est['step']
+    noisy = mb.run_benchmark(SCENARIO, N_VARS, NOISY, reference, steps, starts=starts,
+                             **peers)
+    print_case(noisy, '_noisy', reference)
+    if peers['baselines']:
+        print(f'noisy_best_slsqp_variant: {noisy["slsqp"]}')
+        print_ratios(noisy, noisy=True)
+    print_peers(noisy, noisy=True)
+    if peers['baselines']:
+        print(f'slsqp_default_gap_pct_noisy: '
+              f'{noisy["summaries"]["slsqp"]["max_gap_pct"]:.3f}')
 
 
 if __name__ == '__main__':

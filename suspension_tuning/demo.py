@@ -62,6 +62,11 @@ def report(scenario: str, result) -> str:
                  f'   (improvement {gain:.1f} %)')
     lines.append(f'  largest constraint g  {max(result.g, default=0.0):.3f} (<= 0 feasible, '
                  f'eq. 11)')
+    if result.stop_test:
+        lines.append(f'  stopped by the {result.stop_test} test')
+    if result.check or result.check_note:
+        lines.append(f'  check at a tighter solver tolerance: {result.check or "not checked"}'
+                     + (f' ({result.check_note})' if result.check_note else ''))
     names = list(result.metric_names)
     lines += metric_lines(dict(zip(names, result.baseline_metrics)),
                           dict(zip(names, result.metrics)), column)

@@ -148,6 +148,10 @@ def optimum(contents: BagContents) -> dict[str, Any] | None:
         'n_calibration_runs': int(msg.n_calibration_runs),
         'history': history,
         'wall_time_s': float(msg.wall_time_s),
+        'stop_test': str(getattr(msg, 'stop_test', '')),
+        'check': {'verdict': str(getattr(msg, 'check', '')),
+                  'max_violation': float(getattr(msg, 'check_max_violation', math.nan)),
+                  'note': str(getattr(msg, 'check_note', ''))},
         'baseline': None if not baseline_x else {
             'x': baseline_x, 'f': float(msg.baseline_f),
             'physical': dict(zip([str(n) for n in msg.physical_names],
@@ -502,6 +506,13 @@ def _format_optimum(best: dict[str, Any]) -> list[str]:
     lines.append(f'  x = {best["x"]}')
     lines.append(f'  f = {best["f"]!r}')
     lines.append(f'  g = {best["g"]}')
+    if best.get('stop_test'):
+        lines.append(f'  stopped by: {best["stop_test"]} test')
+    check = best.get('check') or {}
+    if check.get('verdict') or check.get('note'):
+        lines.append(f'  check at a tighter solver tolerance: '
+                     f'{check.get("verdict") or "not checked"}'
+                     + (f' ({check["note"]})' if check.get('note') else ''))
     for name, value in best['physical'].items():
         lines.append(f'  {name} = {value:g}')
     last = best.get('last_iterate')

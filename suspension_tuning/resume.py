@@ -9,6 +9,7 @@ The run continues from the last record with the same loop the coordinator uses
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Callable
 from typing import Any
@@ -17,7 +18,7 @@ from scipy.optimize import OptimizeResult
 
 from suspension_tuning import evaluation
 from suspension_tuning.bag.history import last_iteration
-from suspension_tuning.tuning import RunCounter, TuningRequest, optimise
+from suspension_tuning.tuning import RunCounter, TuningRequest, optimise, with_noise_levels
 from suspension_tuning.vehicle.params import INTEGRATORS
 
 
@@ -82,6 +83,13 @@ def resume(bag: str | os.PathLike[str], max_iterations: int | None = None,
             counter.calibration_runs += len(scaling.x_samples)
             gradients[name] = SimplifiedGradient(name, request.n_vars, scaling,
                                                  request.fd_step)
+    # the built-in model runs here: its noise levels and the check of the answer, as the
+    # coordinator gives them for the built-in model
+    from suspension_tuning.answer_check import check_options
+
+    request = dataclasses.replace(request, options=with_noise_levels(
+        request.options, request.scenario, request.integrator))
     return optimise(request, models[request.scenario], gradients.get(request.scenario),
                     callback, history=state['history'], counter=counter,
-                    constraint_models=models, constraint_gradients=gradients)
+                    constraint_models=models, constraint_gradients=gradients,
+                    **check_options(request.scenario, request.n_vars))

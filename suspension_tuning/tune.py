@@ -256,6 +256,12 @@ def format_result(result) -> str:
               f'wall time: {result.wall_time_s:.1f} s']
     if result.model_fingerprint:
         lines.append(f'full model: fingerprint {result.model_fingerprint}')
+    if getattr(result, 'stop_test', ''):
+        lines.append(f'stopped by: {result.stop_test} test')
+    if getattr(result, 'check', '') or getattr(result, 'check_note', ''):
+        verdict = result.check or 'not checked'
+        lines.append(f'check at a tighter solver tolerance: {verdict}'
+                     + (f' ({result.check_note})' if result.check_note else ''))
     if design:
         lines.append('optimum in physical units:' if result.feasible else
                      'least violating design in physical units (not feasible):')

@@ -381,7 +381,10 @@ def optimise(request: TuningRequest, full_model: FullModel,
              history: Sequence[Mapping[str, Any]] | None = None,
              counter: RunCounter | None = None,
              constraint_models: Mapping[str, FullModel] | None = None,
-             constraint_gradients: Mapping[str, SimplifiedGradient] | None = None
+             constraint_gradients: Mapping[str, SimplifiedGradient] | None = None,
+             check_model: FullModel | None = None,
+             check_gtol: float = 5e-3,
+             check_continuations: int = 2,
              ) -> OptimizeResult:
     """Run Dynamic-Q on the full model with the requested gradient source.
 
@@ -412,6 +415,17 @@ def optimise(request: TuningRequest, full_model: FullModel,
         Scenario name -> simplified gradient of that scenario, for every other scenario
         of an extra constraint with a simplified model, when the gradient source is
         'simplified'.
+    check_model : callable, optional
+        The objective scenario's full model at a tighter solver tolerance
+        (:mod:`~suspension_tuning.answer_check`).  After the stop the reported design
+        runs on it once (a paid full run, counted in ``counter.full_runs``).  When
+        that run finds it infeasible (max g > ``check_gtol``) while the run's own model
+        found it feasible, the run continues from it with every eq. 11 constraint
+        shifted by the offset measured there (``g + max(0, g_check - g)``, summed over
+        at most ``check_continuations`` continuations), and each new answer is checked
+        again.  The result's ``check`` says both verdicts (:func:`check_summary`).
+    check_gtol, check_continuations : float, int
+        See ``check_model`` (config/vehicle.yaml ``integration.check``).
 
     Returns
     -------
@@ -424,7 +438,10 @@ def optimise(request: TuningRequest, full_model: FullModel,
         ``value - bound`` of each extra constraint.  ``x`` is the last iterate; the
         answer to report is the best point (``x_best``, ``f_best``, ``g_best``,
         ``best_iteration``, ``best_feasible`` and ``constraint_values_best``; see
-        :func:`~suspension_tuning.optim.dynamic_q.dynamic_q`).  Every history record
+        :func:`~suspension_tuning.optim.dynamic_q.dynamic_q`).  ``stop_test`` names
+        the test that ended the run ('xtol', 'ftol', 'noise', 'rho_min', 'maxiter',
+        'cancelled'); with ``check_model``, ``check`` holds the check's verdicts
+        (:func:`check_summary`).  Every history record
         whose full run returned named metrics holds them (``metrics``: name -> value,
         the objective scenario's), and ``metrics_best`` those of the reported design.
     """
@@ -443,16 +460,43 @@ def optimise(request: TuningRequest, full_model: FullModel,
     def staircase(m: int) -> list[bool]:
         return [True] * (m - len(extra_staircase)) + extra_staircase
 
-    opt = DynamicQ(request.start, lower, upper, request.options, history=history,
-                   gradient_source=request.gradient_source,
-                   surrogate_rule_constraints=staircase)
+    options = DynamicQOptions.from_mapping(request.options).as_dict()
     correction_options = CorrectionOptions.from_mapping(request.correction)
     correct = request.gradient_source == 'simplified' and correction_options.method != 'none'
-    correction: SecantCorrection | None = None
+    corrections: list[SecantCorrection | None] = [None]
     # Full-model values at every evaluated design (the history's too, when resumed):
     # the correction compares them with the simplified values at the same design.
     evaluated = {np.asarray(r['x'], float).tobytes(): np.r_[float(r['f']), np.asarray(
         r['g'], float)] for r in (history or ()) if correct}
+    opt = DynamicQ(request.start, lower, upper, options, history=history,
+                   gradient_source=request.gradient_source,
+                   surrogate_rule_constraints=staircase)
+    cancelled = _drive(opt, request, terms, evaluated, correct, correction_options,
+                       corrections, callback, counter, lower, upper, 0)
+    result = opt.result()
+    check: dict[str, Any] | None = None
+    if check_model is not None and not cancelled and 'x_best' in result:
+        result, check = _check_and_continue(
+            result, request, terms, evaluated, correct, correction_options, corrections,
+            callback, counter, lower, upper, options, staircase, check_model, check_gtol,
+            check_continuations)
+    correction = corrections[0]
+    return _finish(result, request, terms, counter, correction, check)
+
+
+def _drive(opt: DynamicQ, request: TuningRequest, terms: _ConstraintTerms,
+           evaluated: dict[bytes, Array], correct: bool,
+           correction_options: CorrectionOptions,
+           corrections: list[SecantCorrection | None],
+           callback: Callable[[dict[str, Any], RunCounter], bool | None] | None,
+           counter: RunCounter, lower: Array, upper: Array, first_iteration: int) -> bool:
+    """Answer Dynamic-Q's requests until it stops; True when cancelled.
+
+    Records go to ``callback`` with their iteration numbers after ``first_iteration``
+    (a continuation after the check numbers on).
+    """
+    n = request.n_vars
+    cancelled = False
     while (ask := opt.ask()) is not None:
         kind, x = ask
         try:
@@ -471,23 +515,121 @@ def optimise(request: TuningRequest, full_model: FullModel,
                 df, dg, values = terms.simplified_gradient(x, lower, upper)
                 full = evaluated.get(x.tobytes())
                 if correct and values is not None and full is not None:
-                    if correction is None:
-                        correction = SecantCorrection(full.size, n,
-                                                      correction_options.min_step)
-                    correction.observe(x, full, values)
-                    jac = correction.correct(np.vstack([df, dg]))
+                    if corrections[0] is None:
+                        corrections[0] = SecantCorrection(full.size, n,
+                                                          correction_options.min_step)
+                    corrections[0].observe(x, full, values)
+                    jac = corrections[0].correct(np.vstack([df, dg]))
                     df, dg = jac[0], jac[1:]
                 record = opt.tell((df, dg, None), source='simplified')
         except RunCancelled:
             opt.stop('cancelled')
+            cancelled = True
             break
         if record is not None and 'metrics' not in record:
             metrics = terms.metrics.get(np.asarray(record['x'], float).tobytes())
             if metrics is not None:
                 record['metrics'] = metrics
+        if record is not None and first_iteration:
+            record['iteration'] = int(record['iteration']) + first_iteration
         if record is not None and callback is not None and callback(record, counter):
             opt.stop('cancelled')
-    result = opt.result()
+            cancelled = True
+    return cancelled
+
+
+def check_summary(g_run: ArrayLike, g_check: ArrayLike, f_check: float, gtol: float
+                  ) -> dict[str, Any]:
+    """The check's verdicts on one design (see :func:`optimise`'s ``check_model``).
+
+    ``feasible_run`` and ``feasible_check`` (max g <= gtol on the run's model and at
+    the tighter tolerance), ``f_check``, ``max_violation_check``, ``offset`` (g_check -
+    g_run of the eq. 11 constraints).
+    """
+    g_run, g_check = np.asarray(g_run, float), np.asarray(g_check, float)
+    viol = float(max(0.0, np.max(g_check))) if g_check.size else 0.0
+    return {'feasible_run': bool(g_run.size == 0 or np.max(g_run) <= gtol),
+            'feasible_check': bool(viol <= gtol), 'f_check': float(f_check),
+            'max_violation_check': viol, 'offset': (g_check - g_run[:g_check.size]).tolist()}
+
+
+def _check_and_continue(result: OptimizeResult, request: TuningRequest,
+                        terms: _ConstraintTerms, evaluated: dict[bytes, Array],
+                        correct: bool, correction_options: CorrectionOptions,
+                        corrections: list[SecantCorrection | None],
+                        callback: Callable[[dict[str, Any], RunCounter], bool | None] | None,
+                        counter: RunCounter, lower: Array, upper: Array,
+                        options: Mapping[str, Any], staircase: Callable[[int], list[bool]],
+                        check_model: FullModel, check_gtol: float, continuations: int
+                        ) -> tuple[OptimizeResult, dict[str, Any]]:
+    """Check the reported design at the tighter tolerance; continue shifted if needed.
+
+    The check's verdict is feasible when its max g <= ``check_gtol``.  When it is not
+    while the run's model found the design feasible, Dynamic-Q goes on from it with
+    the eq. 11 constraints shifted by the offset measured there (accumulated over at
+    most ``continuations`` continuations), and the new answer is checked again.
+    """
+    def checked(x: Array) -> tuple[float, Array]:
+        run = check_model(np.asarray(x, float)[None, :])
+        counter.full_runs += 1
+        return float(run.f[0]), np.asarray(run.g[0], float)
+
+    x_best = np.asarray(result.x_best, float)
+    k = len(np.asarray(terms.evaluate_cached(x_best)[1]))
+    f_c, g_c = checked(x_best)
+    check = check_summary(np.asarray(result.g_best, float)[:len(g_c)], g_c, f_c, check_gtol)
+    check.update(continued=False, continuations=0, first=dict(check),
+                 x_checked=x_best.tolist(), check_gtol=check_gtol)
+    shift = np.zeros(k)
+    while (not check['feasible_check'] and check['feasible_run']
+           and check['continuations'] < continuations):
+        # An engineer's correction of the same kind as the secant one: the constraints
+        # shifted up by the offset the check measured at the answer.
+        shift[:len(g_c)] += np.maximum(0.0, np.asarray(check['offset'], float))
+        terms.shift = shift.copy()
+        for key in list(evaluated):
+            full = terms.values.get(key)
+            if full is not None:
+                evaluated[key] = np.r_[full[0], full[1] + shift]
+        first = len(result.history)
+        opt = DynamicQ(x_best, lower, upper, options, gradient_source=request.gradient_source,
+                       surrogate_rule_constraints=staircase)
+        cancelled = _drive(opt, request, terms, evaluated, correct, correction_options,
+                           corrections, callback, counter, lower, upper, first)
+        second = opt.result()
+        terms.shift = None
+        for rec in second.history:
+            if int(rec['iteration']) < first:
+                rec['iteration'] = int(rec['iteration']) + first
+        second.update(history=list(result.history) + list(second.history),
+                      nit=int(result.nit) + int(second.nit),
+                      iterations=int(result.nit) + int(second.nit))
+        if 'best_iteration' in second:
+            second.update(best_iteration=int(second.best_iteration) + first)
+        # the answer's values as the model gave them (the shift was the run's)
+        for name in ('g', 'g_best'):
+            if name in second:
+                second[name] = np.asarray(second[name], float) - shift
+        if 'g_best' in second:
+            second.update(max_violation_best=float(max(0.0, np.max(second.g_best))))
+        result = second
+        check.update(continued=True, continuations=check['continuations'] + 1,
+                     shift=shift.tolist(), first_iteration=check.get('first_iteration',
+                                                                     first))
+        if cancelled or 'x_best' not in result:
+            break
+        x_best = np.asarray(result.x_best, float)
+        f_c, g_c = checked(x_best)
+        check.update(check_summary(np.asarray(result.g_best, float)[:len(g_c)], g_c, f_c,
+                                   check_gtol), x_checked=x_best.tolist())
+    return result, check
+
+
+def _finish(result: OptimizeResult, request: TuningRequest, terms: _ConstraintTerms,
+            counter: RunCounter, correction: SecantCorrection | None,
+            check: dict[str, Any] | None) -> OptimizeResult:
+    """The result's counts, constraints, metrics and correction summary."""
+    n = request.n_vars
     for rec in result.history:  # records the loop above did not see (several in one tell)
         metrics = terms.metrics.get(np.asarray(rec['x'], float).tobytes())
         if metrics is not None and 'metrics' not in rec:
@@ -512,7 +654,39 @@ def optimise(request: TuningRequest, full_model: FullModel,
             result.update(metrics_best=dict(metrics))
     result.update(correction=correction.summary() if correction is not None
                   else {'method': 'none'})
+    if check is not None:
+        result.update(check=check)
     return result
+
+
+def noise_levels(scenario: str, integrator: str = '') -> tuple[float, float]:
+    """Noise levels (f, g) of the built-in full model (config/optimiser.yaml
+    ``noise_levels``); (0, 0) for a scenario or integrator without an entry.
+    """  # noqa: D205
+    from suspension_tuning.paths import config_dir, read_yaml
+
+    if not integrator:
+        from suspension_tuning.vehicle.params import load_vehicle_params
+
+        integrator = load_vehicle_params().integrator.method
+    levels = read_yaml(config_dir() / 'optimiser.yaml').get('noise_levels', {})
+    entry = levels.get(scenario, {}).get(integrator)
+    if not entry:
+        return 0.0, 0.0
+    return float(entry['f']), float(entry['g'])
+
+
+def with_noise_levels(options: Mapping[str, Any] | None, scenario: str,
+                      integrator: str = '') -> dict[str, Any]:
+    """Dynamic-Q options with ``noise_f`` and ``noise_g`` of the model filled in.
+
+    Options that set either to a positive value keep theirs; else (unset or both 0,
+    the defaults) :func:`noise_levels` gives them.
+    """
+    out = DynamicQOptions.from_mapping(options).as_dict()
+    if out['noise_f'] <= 0.0 and out['noise_g'] <= 0.0:
+        out['noise_f'], out['noise_g'] = noise_levels(scenario, integrator)
+    return out
 
 
 class _ConstraintTerms:
@@ -554,6 +728,11 @@ class _ConstraintTerms:
         #: Named metrics of the objective scenario's run at each evaluated design (keyed
         #: by x's bytes), when its full model returns them.
         self.metrics: dict[bytes, dict[str, float]] = {}
+        #: Full-model (f, g) at each evaluated design, unshifted (keyed by x's bytes).
+        self.values: dict[bytes, tuple[float, Array]] = {}
+        self._inputs_at: dict[bytes, dict[str, Any]] = {}
+        #: Shift added to g (the check's continuation), or None.
+        self.shift: Array | None = None
 
     def _run(self, scenario: str, points: Array) -> FullEvaluation:
         evaluation = self.models[scenario](points)
@@ -567,7 +746,26 @@ class _ConstraintTerms:
         return np.column_stack(columns) if columns else np.zeros((m, 0))
 
     def evaluate(self, x: Array) -> tuple[float, Array]:
-        """Objective and all constraints at x (one full run per scenario)."""
+        """Objective and all constraints at x, plus the shift (one full run per scenario).
+
+        A design run before is answered from its values (no run): the continuation
+        after the check starts at the reported design.
+        """
+        f, g = self.evaluate_cached(x)
+        return f, g if self.shift is None else g + self.shift
+
+    def evaluate_cached(self, x: Array) -> tuple[float, Array]:
+        """Unshifted objective and constraints at x (a run only for a new design)."""
+        key = np.asarray(x, float).tobytes()
+        if key not in self.values:
+            self.values[key] = self._evaluate(x)
+            self._inputs_at[key] = dict(self.inputs)
+        else:  # the simplified models' inputs of that design's runs (handling)
+            self.inputs.update(self._inputs_at[key])
+        f, g = self.values[key]
+        return f, g.copy()
+
+    def _evaluate(self, x: Array) -> tuple[float, Array]:
         runs = {name: self._run(name, x[None, :]) for name in self.models}
         for name, run in runs.items():
             self.inputs[name] = run.inputs

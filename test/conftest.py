@@ -115,8 +115,15 @@ def in_process_optimum():
             evaluated = evaluate(scenario, points)
             return FullEvaluation(evaluated.f, evaluated.g, evaluated.result)
 
+        checking = {}
+        if model is None:  # the built-in model: the coordinator's noise levels and check
+            from suspension_tuning.answer_check import check_options
+            from suspension_tuning.tuning import with_noise_levels
+
+            options = with_noise_levels(options, scenario)
+            checking = check_options(scenario, 2)
         return optimise(TuningRequest(scenario, 2, None, 'simplified', options), full_model,
-                        SimplifiedGradient(scenario, 2, scaling))
+                        SimplifiedGradient(scenario, 2, scaling), **checking)
     return run
 
 

@@ -465,3 +465,36 @@ def test_curvatures_after_a_step_shorter_than_curvature_min_step_are_kept():
     assert a_kept == [a_kept[0]] * len(a_kept)
     with pytest.raises(ValueError, match='curvature_min_step'):
         DynamicQOptions(curvature_min_step=-1.0)
+
+
+def _drive_rippled(noise_f):
+    # min |x - (0.3, 0.7)|^2 s.t. x1 + x2 <= 0.8 (optimum (0.2, 0.6), f 0.02, by hand)
+    # with a deterministic ripple of amplitude 2e-3 on f standing in for a model's
+    # noise, and gradients 10 % too steep, as from another model (source 'simplified')
+    target = np.array([0.3, 0.7])
+    options = dict(load_options(str(CONFIG), 'vehicle').as_dict(), noise_f=noise_f)
+    driver = DynamicQ(np.array([0.9, 0.9]), [0.001, 0.001], [1.0, 1.0], options)
+    while (request := driver.ask()) is not None:
+        kind, x = request
+        if kind == 'evaluate':
+            ripple = 2e-3 * np.sin(997.0 * x[0]) * np.cos(1013.0 * x[1])
+            driver.tell((float(np.sum((x - target) ** 2) + ripple), [x.sum() - 0.8], None))
+        else:
+            driver.tell((1.1 * 2.0 * (x - target), np.array([[1.0, 1.0]]), None),
+                        source='simplified')
+    return driver.result()
+
+
+def test_noise_test_ends_a_run_whose_steps_change_f_by_no_more_than_its_noise():
+    without = _drive_rippled(0.0)
+    with_noise = _drive_rippled(2e-3)  # the ripple's amplitude as the noise level
+    assert without.stop_test == 'xtol' and without.status == 0
+    assert with_noise.stop_test == 'noise' and with_noise.status == 5
+    assert with_noise.success
+    assert with_noise.nit < without.nit
+    # the same reported design: the steps the noise test saves did not improve it
+    np.testing.assert_allclose(with_noise.x_best, without.x_best)
+    # near the optimum (0.2, 0.6): within the ripple's reach, 2e-3 of f ~ 0.02 of x
+    assert np.max(np.abs(with_noise.x_best - [0.2, 0.6])) <= 0.02
+    with pytest.raises(ValueError, match='noise_f'):
+        DynamicQOptions(noise_f=-1.0)

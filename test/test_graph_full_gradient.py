@@ -94,9 +94,15 @@ def test_coordinator_action_with_full_gradients_equals_in_process(ros_context, e
     from suspension_tuning_interfaces.action import Optimise
 
     from suspension_tuning import evaluation
+    from suspension_tuning.answer_check import check_options
     from suspension_tuning.nodes.coordinator import CoordinatorNode
     from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
-    from suspension_tuning.tuning import FullEvaluation, TuningRequest, optimise
+    from suspension_tuning.tuning import (
+        FullEvaluation,
+        TuningRequest,
+        optimise,
+        with_noise_levels,
+    )
 
     sim = FullVehicleSimNode(context=ros_context)
     coordinator = CoordinatorNode(context=ros_context)
@@ -119,12 +125,19 @@ def test_coordinator_action_with_full_gradients_equals_in_process(ros_context, e
         run = evaluation.evaluate('handling', points)
         return FullEvaluation(run.f, run.g)
 
-    local = optimise(TuningRequest('handling', 2, None, 'full', options), full_model)
+    # the built-in model: the coordinator's noise levels and the check of the answer
+    local = optimise(TuningRequest('handling', 2, None, 'full',
+                                   with_noise_levels(options, 'handling')), full_model,
+                     **check_options('handling', 2))
     np.testing.assert_array_equal(result.x, local.x_best)  # the reported (best) design
     assert result.f == local.f_best and result.best_iteration == local.best_iteration
     assert result.n_full_runs == local.n_full_runs
-    # Per iteration: one full run, plus 2n = 4 for each central-difference gradient.
-    assert result.n_full_runs == local.nfev + 4 * local.ngev
+    # Per iteration: one full run (a design evaluated before is not run again), plus
+    # 2n = 4 for each central-difference gradient, and the check of the answer at the
+    # tighter tolerance (feasible: no continuation).
+    assert result.check == 'feasible' and not local.check['continued']
+    distinct = len({tuple(np.asarray(r['x'], float)) for r in local.history})
+    assert result.n_full_runs == distinct + 4 * local.ngev + 1
     assert result.physical_names[0] == 'dpsf_front'
 
     bad = wait(client.send_goal_async(Optimise.Goal(scenario='ride', n_vars=5)))

@@ -60,9 +60,15 @@ def test_optimise_goal_integrator_runs_the_variable_step_model(ros_context, exec
     from suspension_tuning_interfaces.action import Optimise
 
     from suspension_tuning import evaluation
+    from suspension_tuning.answer_check import check_options
     from suspension_tuning.nodes.coordinator import CoordinatorNode
     from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
-    from suspension_tuning.tuning import FullEvaluation, TuningRequest, optimise
+    from suspension_tuning.tuning import (
+        FullEvaluation,
+        TuningRequest,
+        optimise,
+        with_noise_levels,
+    )
 
     sim = FullVehicleSimNode(context=ros_context)
     coordinator = CoordinatorNode(context=ros_context)
@@ -85,7 +91,9 @@ def test_optimise_goal_integrator_runs_the_variable_step_model(ros_context, exec
         run = evaluation.evaluate('handling', points, integrator='variable_step')
         return FullEvaluation(run.f, run.g)
 
-    local = optimise(TuningRequest('handling', 2, None, 'full', options), full_model)
+    local = optimise(TuningRequest('handling', 2, None, 'full',
+                                   with_noise_levels(options, 'handling', 'variable_step')),
+                     full_model, **check_options('handling', 2))
     np.testing.assert_array_equal(result.x, local.x_best)  # the reported (best) design
     assert result.f == local.f_best and result.best_iteration == local.best_iteration
     # the run configuration names the integrator

@@ -54,8 +54,11 @@ def test_ride_optimisation_with_simplified_gradients_converges_through_the_graph
     # Paper section 2: one full run per iteration (per evaluation) and 2n simplified
     # runs per gradient, plus one at the iterate for the correction's values; no
     # full-model gradient runs.
+    # and the check of the answer at the tighter tolerance, paid too (feasible: no
+    # continuation)
     iterations_evaluated = len(result.history)
-    assert result.n_full_runs == iterations_evaluated
+    assert result.check == 'feasible'
+    assert result.n_full_runs == iterations_evaluated + 1
     assert result.n_simplified_runs % (2 * n + 1) == 0 and result.n_simplified_runs > 0
     phases = [message.feedback.phase for message in feedback]
     assert phases.count('iteration') == len(result.history)

@@ -170,3 +170,30 @@ def test_slsqp_runs_keep_every_evaluation_in_order(monkeypatch):
     # |f_ref|, so use a reference of 1e-3 (f within 1e-5 of it)
     to_solve = mb.full_runs_to_solve(ev, 1e-3)
     assert to_solve <= run.n_full_runs
+
+
+def _result(solved, full_runs, calibration_runs=0, check_runs=0, budget=300):
+    return mb.StartResult(method='m', start='s', x0=[0.5], x=[0.5], f=0.1, max_violation=0.0,
+                          f_fixed_step=0.1, max_violation_fixed_step=0.0, gap_pct=0.0,
+                          feasible=True, solved=solved, full_runs_to_solve=5.0,
+                          full_runs=full_runs, wall_time_s=0.0, budget=budget,
+                          calibration_runs=calibration_runs, check_runs=check_runs)
+
+
+def test_paid_full_runs_count_calibration_and_every_run_to_the_own_stop_of_a_solved_answer():
+    # 4 calibration runs + 12 runs to the stop (the check's one run among them)
+    assert mb.paid_full_runs(_result(True, 12, calibration_runs=4, check_runs=1)) == 16
+    # an answer not solved is not reached, however few runs it took
+    assert mb.paid_full_runs(_result(False, 3)) == math.inf
+    # a method without a stop of its own pays its whole budget
+    assert mb.paid_full_runs(_result(True, 40, budget=300), own_stop=False) == 300
+
+
+def test_rounds_share_only_the_calibration_among_the_workers():
+    r = _result(True, 12, calibration_runs=16)
+    r.paid_full_runs = mb.paid_full_runs(r)  # 28
+    # 16 samples in ceil(16 / P) rounds, then the 12 sequential runs one round each
+    assert [mb.rounds(r, p, 16) for p in (1, 4, 16)] == [28, 16, 13]
+    unsolved = _result(False, 12)
+    unsolved.paid_full_runs = mb.paid_full_runs(unsolved)
+    assert mb.rounds(unsolved, 4) == math.inf

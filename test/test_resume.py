@@ -14,8 +14,14 @@ pytestmark = pytest.mark.ros
 
 def test_recorded_run_resumes_to_the_uninterrupted_iterates(start_tuning_graph):
     from suspension_tuning import evaluation
+    from suspension_tuning.answer_check import check_options
     from suspension_tuning.resume import resume
-    from suspension_tuning.tuning import FullEvaluation, TuningRequest, optimise
+    from suspension_tuning.tuning import (
+        FullEvaluation,
+        TuningRequest,
+        optimise,
+        with_noise_levels,
+    )
 
     graph = start_tuning_graph(record=True, parameters={
         'recorder': {'post_run_s': 0.5}, 'coordinator': {'final_telemetry': False}})
@@ -29,7 +35,9 @@ def test_recorded_run_resumes_to_the_uninterrupted_iterates(start_tuning_graph):
         run = evaluation.evaluate('handling', points)
         return FullEvaluation(run.f, run.g)
 
-    straight = optimise(TuningRequest('handling', 2, None, 'full', options), full_model)
+    straight = optimise(TuningRequest('handling', 2, None, 'full',
+                                      with_noise_levels(options, 'handling')), full_model,
+                        **check_options('handling', 2))
     assert short.iterations == 2
     np.testing.assert_array_equal(resumed.x, straight.x)
     assert resumed.f == straight.f

@@ -216,3 +216,41 @@ def test_tuning_request_names_the_integrator_and_rejects_unknown_ones():
     assert TuningRequest('ride', 2, integrator='variable_step').integrator == 'variable_step'
     with pytest.raises(ValueError, match='unknown integrator'):
         TuningRequest('ride', 2, integrator='rk45')
+
+
+def test_an_answer_the_tighter_check_finds_infeasible_is_continued_with_shifted_constraints():
+    # The check model's constraint lies 0.05 higher than the run model's (as a loose
+    # integrator's bias would): x1 + x2 - 0.75 <= 0, optimum (0.175, 0.575) by the same
+    # projection as X_STAR, f = 2 * 0.125^2 = 0.03125 (hand calculation).
+    def check_model(points):
+        run = quadratic_model(points)
+        return FullEvaluation(f=run.f, g=run.g + 0.05)
+
+    request = TuningRequest('ride', 2, gradient_source='simplified', options=OPTIONS)
+    plain = optimise(request, quadratic_model, analytic_gradient)
+    checked = optimise(request, quadratic_model, analytic_gradient, check_model=check_model,
+                       check_gtol=1e-6)
+    check = checked.check
+    assert not check['first']['feasible_check'] and check['first']['feasible_run']
+    assert check['first']['offset'] == pytest.approx([0.05])
+    assert check['continued'] and check['continuations'] == 1
+    assert check['shift'] == pytest.approx([0.05])
+    assert check['feasible_check'] and check['feasible_run']
+    np.testing.assert_allclose(checked.x_best, [0.175, 0.575], atol=1e-4)
+    assert checked.f_best == pytest.approx(0.03125, rel=1e-3)
+    # the answer's g as the run's model gives it (the shift is not the model's)
+    assert checked.g_best[0] == pytest.approx(-0.05, abs=1e-4)
+    # paid: the first run's, the check's two and the continuation's evaluations (nfev,
+    # that pass's) but its start, the first answer, answered from the values run before
+    assert checked.n_full_runs == plain.n_full_runs + 2 + checked.nfev - 1
+    assert [r['iteration'] for r in checked.history] == list(range(len(checked.history)))
+
+
+def test_an_answer_the_check_confirms_is_not_continued():
+    request = TuningRequest('ride', 2, gradient_source='simplified', options=OPTIONS)
+    plain = optimise(request, quadratic_model, analytic_gradient)
+    checked = optimise(request, quadratic_model, analytic_gradient,
+                       check_model=quadratic_model, check_gtol=1e-6)
+    assert checked.check['feasible_check'] and not checked.check['continued']
+    assert checked.n_full_runs == plain.n_full_runs + 1  # the check's one run
+    np.testing.assert_array_equal(checked.x_best, plain.x_best)

@@ -32,6 +32,7 @@ itself is :func:`suspension_tuning.tuning.optimise`, shared with in-process runs
 from __future__ import annotations
 
 import collections
+import dataclasses
 import math
 import subprocess
 import threading
@@ -74,6 +75,7 @@ from suspension_tuning.tuning import (
     centre,
     optimise,
     physical_settings,
+    with_noise_levels,
 )
 from suspension_tuning.vehicle.design import load_design_space, validate_design
 
@@ -173,6 +175,7 @@ def action_result(result: Any, history: list[IterationRecord], t0: float,
     scenario = str(result.get('scenario', ''))
     set_metrics(message, scenario, reported=physical_metrics(
         scenario, (), result.get('metrics_best') or {}))
+    set_check(message, result)
     return message
 
 
@@ -185,6 +188,38 @@ def result_topic_message(result: Optimise.Result) -> OptimisationResult:
     """
     return OptimisationResult(**{name: getattr(result, name)
                                  for name in OptimisationResult.get_fields_and_field_types()})
+
+
+def set_check(message: Optimise.Result, result: Any, note: str = '') -> None:
+    """The stop test and the tighter-tolerance check's verdicts (``tuning.optimise``)."""
+    message.stop_test = str(result.get('stop_test', '') or '')
+    check = result.get('check')
+    message.check_max_violation = math.nan
+    if not check:
+        message.check = ''
+        message.check_note = note or 'not checked at a tighter solver tolerance'
+        return
+    message.check = 'feasible' if check['feasible_check'] else 'infeasible'
+    message.check_max_violation = float(check['max_violation_check'])
+    message.check_note = check_note(check)
+
+
+def check_note(check: dict[str, Any]) -> str:
+    """Both verdicts of the check in words (``tuning.optimise``'s ``check``)."""
+    first = check.get('first', check)
+    text = (f"the run's model: {'feasible' if first['feasible_run'] else 'infeasible'}; "
+            f"at the tighter tolerance: max g {first['max_violation_check']:.4g} "
+            f"({'feasible' if first['feasible_check'] else 'infeasible'}, "
+            f"tolerance {check.get('check_gtol', math.nan):.3g})")
+    if check.get('continued'):
+        shift = ', '.join(f'{v:.4g}' for v in check.get('shift', []))
+        text += (f"; continued {check['continuations']} time(s) with the tyre-hop "
+                 f"constraints shifted by [{shift}]: the answer's max g at the tighter "
+                 f"tolerance {check['max_violation_check']:.4g} "
+                 f"({'feasible' if check['feasible_check'] else 'infeasible'})")
+        if not check['feasible_check']:
+            text += '; the solver tolerance decides this design\'s feasibility'
+    return text
 
 
 def set_metrics(message: Optimise.Result, scenario: str,
@@ -670,10 +705,14 @@ class CoordinatorNode(Node):
                     gradients[scenario] = self._simplified_gradient(request, scenario)
             models = {name: self._full_model(request, name)
                       for name in request.constraint_scenarios}
+            checking, note = self._check_options(request, fingerprint)
+            if checking['check_model'] is not None:  # the built-in model: its noise levels
+                request = dataclasses.replace(request, options=with_noise_levels(
+                    request.options, request.scenario, request.integrator))
             result = optimise(request, self._full_model(request),
                               self._simplified_gradient(request), on_iteration,
                               counter=counter, constraint_models=models,
-                              constraint_gradients=gradients)
+                              constraint_gradients=gradients, **checking)
         except (ValueError, ServiceCallError) as error:
             if self._cancel_requested():  # e.g. during the calibration
                 self.get_logger().info(f'goal cancelled ({error})')
@@ -689,6 +728,8 @@ class CoordinatorNode(Node):
             self.result_pub.publish(result_topic_message(message))
             return message
         message = action_result(result, history_msgs, t0, counter)
+        if not result.get('check'):
+            message.check_note = note
         message.model_fingerprint = fingerprint
         design = reported_design(result)
         if design is not None and not goal_handle.is_cancel_requested:
@@ -715,6 +756,32 @@ class CoordinatorNode(Node):
             goal_handle.succeed()
         self.result_pub.publish(result_topic_message(message))
         return message
+
+    def _check_options(self, request: TuningRequest, fingerprint: str
+                       ) -> tuple[dict[str, Any], str]:
+        """``optimise``'s check arguments: the built-in model at the tighter tolerance, in
+        this process, or none and why.
+
+        The workers' model must be the built-in one on the configured road (an FMU's
+        tolerance would go through FMI's setupExperiment, which the workers do not
+        take per goal).  Returns (arguments, note).
+        """  # noqa: D205
+        from suspension_tuning.answer_check import check_options
+        from suspension_tuning.model_identity import builtin_fingerprint
+        from suspension_tuning.studies.common import integrator_name
+
+        none = {'check_model': None, 'check_gtol': 5e-3, 'check_continuations': 0}
+        try:
+            options = check_options(request.scenario, request.n_vars)
+        except (ValueError, KeyError, OSError) as error:
+            return none, f'not checked: {error}'
+        if request.road:
+            return none, 'not checked: a goal road (the check runs the configured road)'
+        if fingerprint != builtin_fingerprint(integrator_name(request.integrator or None)):
+            return none, ("not checked: the workers' model is not the built-in one (an FMU "
+                          "is checked only where its setupExperiment tolerance can be set, "
+                          "which the workers do not do per goal)")
+        return options, ''
 
     def _stopped(self) -> bool:
         """Stop waiting for services: the node shuts down, or the goal is cancelled."""

@@ -117,9 +117,13 @@ STATUS_MESSAGES = {
     2: 'stopped: move limit below rho_min',
     3: 'stopped: maximum number of iterations reached',
     4: 'stopped: move limit below rho_min at an infeasible point',
+    5: 'converged: steps change f and g by no more than their noise',
     99: 'stopped by the callback or the caller',
 }
 """Status codes of the result (``status`` field) and their messages."""
+#: The test that ended a run, by status (the result's ``stop_test``).
+STOP_TESTS = {0: 'xtol', 1: 'ftol', 2: 'rho_min', 3: 'maxiter', 4: 'rho_min', 5: 'noise',
+              99: 'cancelled'}
 
 #: Values of ``DynamicQOptions.surrogate_constraint_curvature``.
 SURROGATE_CURVATURES = ('interpolate', 'zero')
@@ -185,6 +189,14 @@ class DynamicQOptions:
         before the run stops; 1 stops on the first
         [E: 1 for analytic problems; 2 for noisy ones, where one short step
         or one lucky function change proves nothing].
+    noise_f, noise_g : float
+        Noise levels of the objective and of the inequality constraints (standard
+        deviation of a value from one design to a neighbouring one, in their units;
+        More and Wild's ECnoise).  With ``noise_f`` > 0 a step also passes the
+        convergence test (the noise test, status 5) when it changes f by at most
+        ``2 noise_f`` and, with ``noise_g`` > 0, every g_j by at most ``2 noise_g``:
+        its changes are then indistinguishable from the model's noise, which the
+        ftol test cannot know.  0 disables [E: 0 for noise-free functions].
     lfopc : dict
         Options of the LFOPC subproblem solver (see
         :class:`~suspension_tuning.optim.lfopc.LfopOptions`).
@@ -205,6 +217,8 @@ class DynamicQOptions:
     surrogate_objective_curvature: str = 'interpolate'
     converge_iterations: int = 1
     curvature_min_step: float = 0.0
+    noise_f: float = 0.0
+    noise_g: float = 0.0
     lfopc: Mapping[str, Any] | None = None
 
     def __post_init__(self) -> None:
@@ -245,6 +259,10 @@ class DynamicQOptions:
                 self.converge_iterations < 1:
             raise ValueError(f'converge_iterations must be an integer >= 1, got '
                              f'{self.converge_iterations!r}')
+        for name in ('noise_f', 'noise_g'):
+            value = getattr(self, name)
+            if not isinstance(value, int | float) or not np.isfinite(value) or value < 0:
+                raise ValueError(f'{name} must be finite and >= 0, got {value!r}')
         LfopOptions.from_mapping(self.lfopc)
 
     @classmethod
@@ -536,6 +554,7 @@ class DynamicQ:
         self._best: _Point | None = None
         self._least_violating: _Point | None = None
         self._converge_count = 0
+        self._noise_passed = False
         self._last_curvature: tuple[float, Array, Array] | None = None
         self._current: _Point | None = None
         self._rho = self.options.rho0
@@ -598,7 +617,9 @@ class DynamicQ:
         cur = self._current
         res = OptimizeResult()
         if cur is None:
-            res.update(x=self.x0.copy(), success=False, status=self.status, message=self.message)
+            res.update(x=self.x0.copy(), success=False, status=self.status, message=self.message,
+                       stop_test=STOP_TESTS.get(self.status, '') if self.status is not None
+                       else '')
             res.update(self._counters(), history=list(self.history))
             return res
         viol = _max_violation(cur.g, cur.h)
@@ -613,8 +634,9 @@ class DynamicQ:
             jac=None if cur.df is None else cur.df.copy(),
             max_violation=viol,
             maxcv=viol,
-            success=bool(status in (0, 1, 2) and feasible),
+            success=bool(status in (0, 1, 2, 5) and feasible),
             status=status,
+            stop_test=STOP_TESTS.get(status, '') if status is not None else '',
             message=self.message
             + ('' if feasible or status is None else ' (last iterate infeasible)'),
             nit=self._iteration(),
@@ -721,6 +743,25 @@ class DynamicQ:
                 _max_violation(point.g, point.h)
                 < _max_violation(self._least_violating.g, self._least_violating.h)):
             self._least_violating = point
+
+    def _within_noise(self, cur: _Point, new: _Point) -> bool:
+        """The noise test: the step's signal is below the noise (``noise_f``, ``noise_g``).
+
+        The change the gradients at ``cur`` predict along the step, ``|df . dx|`` and
+        every ``|dg_j . dx|``, is at most twice the noise level of f (and of g, with
+        ``noise_g`` > 0), and ``new`` is feasible within twice the noise of g while a
+        feasible design is known: such a step can no longer tell better from worse.
+        """
+        opt = self.options
+        if opt.noise_f <= 0.0 or cur.df is None or self._best is None:
+            return False
+        dx = new.x - cur.x
+        if abs(float(cur.df @ dx)) > 2.0 * opt.noise_f:
+            return False
+        if _max_violation(new.g, new.h) > opt.gtol + 2.0 * opt.noise_g:
+            return False
+        return bool(opt.noise_g <= 0.0 or cur.g.size == 0
+                    or np.max(np.abs(cur.dg @ dx)) <= 2.0 * opt.noise_g)
 
     def _record(
         self,
@@ -913,14 +954,18 @@ class DynamicQ:
             accepted = not (worse and opt.worse_step == 'reject')
             df_change = abs(new.f - cur.f)
             f_scale = 1.0 + abs(cur.f)
-            small = step < opt.xtol or df_change < opt.ftol * f_scale
+            by_tolerance = step < opt.xtol or df_change < opt.ftol * f_scale
+            noise = self._within_noise(cur, new)
             kept = new if accepted else cur
             # a converged iterate is feasible, or within xtol of the best feasible point:
             # on a staircase constraint (eq. 11) the run can alternate between a feasible
             # point and an infeasible one one stair away
             settled = self._feasible(kept) or (
                 self._best is not None and np.linalg.norm(self._best.x - kept.x) < opt.xtol)
-            self._converge_count = self._converge_count + 1 if small and settled else 0
+            passed = (by_tolerance and settled) or noise
+            self._converge_count = self._converge_count + 1 if passed else 0
+            # the run ends on the noise test when the noise let the last step pass
+            self._noise_passed = passed and not (by_tolerance and settled)
             curvature = {'a': a, 'b': np.asarray(b).copy(), 'c': np.asarray(c).copy()}
             subinfo = {
                 'nsteps': sub.nsteps,
@@ -944,7 +989,7 @@ class DynamicQ:
             else:
                 ref = new
             if self._converge_count >= opt.converge_iterations:
-                self.status = 0 if step < opt.xtol else 1
+                self.status = 5 if self._noise_passed else 0 if step < opt.xtol else 1
                 break
             if opt.rho_min > 0 and self._rho < opt.rho_min:
                 self.status = 2 if self._feasible(cur) else 4

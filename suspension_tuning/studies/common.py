@@ -57,6 +57,7 @@ from suspension_tuning.tuning import (
     centre,
     optimise,
     physical_settings,
+    with_noise_levels,
 )
 from suspension_tuning.vehicle.design import (
     X_LOWER,
@@ -309,6 +310,7 @@ def history_entry(record: dict[str, Any], counter: RunCounter) -> dict[str, Any]
         'iteration': int(record['iteration']),
         'f': float(record['f']),
         'max_violation': float(record['max_violation']),
+        'g': np.asarray(record.get('g', ()), float).tolist(),
         'n_full_runs': counter.full_runs,
         'n_simplified_runs': counter.simplified_runs,
         'x': np.asarray(record['x'], float).tolist(),
@@ -330,6 +332,7 @@ def run_dynamic_q(
     constraints: Sequence[Any] = (),
     constraint_gradients: dict[str, SimplifiedGradient] | None = None,
     integrator: str | None = None,
+    check: bool = False,
 ) -> tuple[StudyRun, Recorder]:
     """Dynamic-Q through :func:`suspension_tuning.tuning.optimise` (the coordinator's loop).
 
@@ -359,8 +362,16 @@ def run_dynamic_q(
         Simplified gradients of the constraints' other scenarios (simplified source).
     integrator : str, optional
         Full-model integrator ('fixed_step' or 'variable_step'; default config).
+    check : bool
+        Check the answer at the tighter tolerance (:mod:`suspension_tuning.answer_check`,
+        ``optimise``'s ``check_model``; paid full runs, in ``n_full_runs``); the
+        verdicts go to ``details['check']``.  When the check continued the run with
+        shifted constraints, the history's earlier records carry the shift in their
+        ``max_violation`` too, so the run reports the continuation's answer.
     """
-    options = vehicle_options() if options is None else options
+    # the built-in model's noise levels (config/optimiser.yaml noise_levels) unless set
+    options = with_noise_levels(vehicle_options() if options is None else options,
+                                scenario, integrator or '')
     start_x = start_point(start, n_vars) if x0 is None else validate_design(x0, n_vars)[0]
     request = TuningRequest(
         scenario, n_vars, start_x, gradient_source, options, FD_STEP, constraints,
@@ -378,10 +389,23 @@ def run_dynamic_q(
     t0 = time.perf_counter()
     models = {name: full_model(name, n_vars, integrator)
               for name in request.constraint_scenarios}
+    from suspension_tuning.answer_check import check_options
+
+    checking = check_options(scenario, n_vars) if check else {}
+
     result = optimise(
         request, full_model(scenario, n_vars, integrator), gradient, on_iteration,
         counter=counter, constraint_models=models, constraint_gradients=constraint_gradients,
+        **checking,
     )
+    verdict = result.get('check')
+    if verdict and verdict.get('continued'):
+        shift = np.asarray(verdict['shift'], float)
+        for entry in history:
+            if entry['iteration'] < verdict['first_iteration'] and entry['g']:
+                g = np.asarray(entry['g'], float)
+                g[:len(shift)] += shift[:len(g)]
+                entry['max_violation'] = max_violation(g)
     wall = time.perf_counter() - t0
     method = 'dq_simplified' if gradient_source == 'simplified' else 'dq_full'
     design = reported_design(result)
@@ -410,6 +434,8 @@ def run_dynamic_q(
         details={'optimiser_options': options, 'fd_step': FD_STEP,
                  **model_details(integrator),
                  'best_iteration': design.iteration, 'best_feasible': design.feasible,
+                 'stop_test': str(result.get('stop_test', '')),
+                 'check': verdict,
                  'x_last': np.asarray(result.x, float).tolist(), 'f_last': float(result.f),
                  'max_violation_last': max_violation(result.g)},  # fmt: skip
     )
@@ -800,6 +826,7 @@ def write_bag(path: Path, run: StudyRun, recorder: Recorder) -> Path:
         n_calibration_runs=run.n_calibration_runs,
         history=[m for _, m in recorder.messages],
         wall_time_s=run.wall_time_s,
+        stop_test=str(run.details.get('stop_test', '')),
     )
     if path.exists():
         shutil.rmtree(path)  # this study's own earlier bag of the same run

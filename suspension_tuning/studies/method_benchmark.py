@@ -74,8 +74,21 @@ SOLVED_VIOLATION = 0.005
 #: Seed and number of the Latin-hypercube start points of :func:`benchmark_starts`.
 LHS_SEED = 7
 LHS_STARTS = 4
-#: Eq. 25 calibration samples (config/simplified_models.yaml scaling.n_samples).
+#: Eq. 25 calibration samples (config/simplified_models.yaml scaling.n_samples), the
+#: reference search's.
 CALIBRATION_SAMPLES = 16
+#: Eq. 25 calibration samples of ours in the benchmark, by scenario (measured,
+#: docs/corrected_gradients.md): none on the ride (the first-order correction alone
+#: carries the gradients: the same optima, nothing dedicated to pay), 4 (corners) on
+#: handling (none lost 2 of 6 starts there, 4 solve all 6 in 3-5 runs).
+BENCH_CALIBRATION_SAMPLES = {'ride': 0, 'handling': 4}
+#: Peers without a stop of their own: their runs always spend the budget, so their
+#: paid full runs are the budget when the answer is solved (their runs in the
+#: benchmark may stop at the first solved design, which the budget's answer equals or
+#: betters on the run's model).
+NO_OWN_STOP = ('optuna_tpe',)
+#: Worker counts of the sequential-round figures.
+ROUND_WORKERS = (1, 4, 16)
 #: Designs per full-model batch when re-running designs on the fixed-step model [E].
 JUDGE_BATCH = 32
 #: The SLSQP variants, peers as well (SciPy's default step; the noise-optimal step).
@@ -428,6 +441,46 @@ class StartResult:
     budget_max_violation: float = math.nan
     budget_feasible: bool = False
     budget: int = PEER_BUDGET
+    paid_full_runs: float = math.inf
+    stop_test: str = ''
+    check_f: float = math.nan
+    check_max_violation: float = math.nan
+    check_runs: int = 0  # the check's full runs, counted in full_runs too
+    calibration_runs: int = 0
+
+    @property
+    def solved_checked(self) -> bool:
+        """Solved, with the largest g of the tighter-tolerance check (when there was one)."""
+        if not self.check_runs:
+            return self.solved
+        return self.solved and self.check_max_violation <= SOLVED_VIOLATION
+
+
+def paid_full_runs(r: StartResult, own_stop: bool = True) -> float:
+    """What a user pays for a start: every full run until the method stops by itself.
+
+    Calibration and the tighter-tolerance check included; ``inf`` when the final
+    answer is not solved (not reached).  A method without a stop of its own
+    (``own_stop`` False) pays its budget.
+    """
+    if not r.solved:
+        return math.inf
+    runs = r.full_runs if own_stop else r.budget  # the check's runs are in full_runs
+    return float(r.calibration_runs + runs)
+
+
+def rounds(r: StartResult, workers: int, calibration_runs: int = 0) -> float:
+    """Sequential full-run rounds of a paid run with ``workers`` in the pool.
+
+    The calibration's samples run ``workers`` at a time; every optimiser step (one
+    full run: Dynamic-Q's iterate, COBYLA's and COBYQA's point, NOMAD's and
+    Optuna's evaluations as run here, one at a time) and the check take one round
+    each.  ``inf`` when not solved.
+    """
+    if math.isinf(r.paid_full_runs):
+        return math.inf
+    sequential = r.paid_full_runs - calibration_runs
+    return float(math.ceil(calibration_runs / workers) + sequential)
 
 
 def run_records(run: common.StudyRun) -> list[dict[str, Any]]:
@@ -510,6 +563,7 @@ def run_method(method: str, scenario: str, n_vars: int, label: str, x0: ArrayLik
                integrator: str, gradient: SimplifiedGradient | None = None,
                eps: float = common.SLSQP_EPS, budget: int | None = None,
                stop_when: Callable[[Mapping[str, Any]], bool] | None = None,
+               calibration_samples: int = CALIBRATION_SAMPLES,
                ) -> common.StudyRun:
     """One run of a method from ``x0`` (no bag).
 
@@ -526,8 +580,9 @@ def run_method(method: str, scenario: str, n_vars: int, label: str, x0: ArrayLik
             raise ValueError('dq_simplified needs a simplified gradient')
         return common.run_dynamic_q(scenario, n_vars, label, source,
                                    gradient if source == 'simplified' else None,
-                                   CALIBRATION_SAMPLES if source == 'simplified' else 0,
-                                   record=False, x0=x0, integrator=integrator)[0]
+                                   calibration_samples if source == 'simplified' else 0,
+                                   record=False, x0=x0, integrator=integrator,
+                                   check=source == 'simplified')[0]
     if method in ('slsqp', 'slsqp_best_fd'):
         return common.run_slsqp(scenario, n_vars, label, record=False, eps=eps,
                                 integrator=integrator, method=method, x0=x0,
@@ -540,11 +595,17 @@ def run_starts(method: str, scenario: str, n_vars: int, reference: Reference,
                starts: Sequence[tuple[str, Array]] | None = None,
                gradient: SimplifiedGradient | None = None, eps: float = common.SLSQP_EPS,
                log: Callable[[str], None] | None = None, budget: int | None = None,
-               stop_when_solved: bool = False) -> list[StartResult]:
+               stop_when_solved: bool = False,
+               calibration_samples: int = CALIBRATION_SAMPLES) -> list[StartResult]:
     """A method from every start (default :func:`benchmark_starts`), judged.
 
     ``budget``: see :func:`run_method`; ``stop_when_solved`` ends a peer's run at its
-    first solved reported design (all that its full runs to solve need).
+    first solved reported design (all that its full runs to solve need; a peer with
+    a stop of its own then cannot say what it pays, so the benchmark lets only the
+    peers of :data:`NO_OWN_STOP` stop early).  Dynamic-Q with simplified gradients
+    counts ``calibration_samples`` and has its reported design checked at the
+    tighter tolerance (:func:`~suspension_tuning.answer_check.check_design`, one
+    full run); every result carries its paid full runs (:func:`paid_full_runs`).
     """
     starts = benchmark_starts(n_vars) if starts is None else starts
     noisy = integrator != REFERENCE_INTEGRATOR
@@ -553,9 +614,19 @@ def run_starts(method: str, scenario: str, n_vars: int, reference: Reference,
         watch = (solved_watch(reference, judge if noisy else None)
                  if stop_when_solved and method in PEERS else None)
         run = run_method(method, scenario, n_vars, label, x0, integrator, gradient, eps,
-                         budget, watch)
-        out.append(judge_run(run, x0, reference, judge, noisy,
-                             PEER_BUDGET if budget is None else budget))
+                         budget, watch, calibration_samples)
+        r = judge_run(run, x0, reference, judge, noisy,
+                      PEER_BUDGET if budget is None else budget)
+        r.stop_test = str(run.details.get('stop_test') or run.message)
+        verdict = run.details.get('check')
+        if method == 'dq_simplified':
+            r.calibration_runs = calibration_samples
+        if verdict:
+            r.check_f = float(verdict['f_check'])
+            r.check_max_violation = float(verdict['max_violation_check'])
+            r.check_runs = 2 if verdict.get('continued') else 1
+        r.paid_full_runs = paid_full_runs(r, own_stop=method not in NO_OWN_STOP)
+        out.append(r)
         if log is not None:
             log(start_line(out[-1]))
     return out
@@ -573,7 +644,8 @@ def _peer_task(method: str, scenario: str, n_vars: int, label: str, x0: Array,
     """One peer from one start, judged, in a worker process (its own judge)."""
     judge = FixedStepJudge(scenario, n_vars)
     return run_starts(method, scenario, n_vars, reference, integrator, judge,
-                      [(label, x0)], budget=budget, stop_when_solved=stop_when_solved)[0]
+                      [(label, x0)], budget=budget,
+                      stop_when_solved=stop_when_solved and method in NO_OWN_STOP)[0]
 
 
 # ---------------------------------------------------------------------- figures
@@ -598,6 +670,8 @@ def summary(results: Sequence[StartResult]) -> dict[str, float]:
         'median_full_runs': median_full_runs(results),
         'max_final_violation': max(r.max_violation for r in results),
         'max_final_violation_fixed_step': max(r.max_violation_fixed_step for r in results),
+        'median_paid_full_runs': float(np.median([r.paid_full_runs for r in results])),
+        'starts_solved_checked': sum(r.solved_checked for r in results),
     }
 
 
@@ -628,7 +702,14 @@ def peer_figures(results: Mapping[str, Sequence[StartResult]], ours: float,
         raise ValueError('no peer ran')
     best = min(medians, key=lambda m: medians[m])
     value = medians[best]
+    paid = {m: float(np.median([r.paid_full_runs for r in results[m]])) for m in medians}
+    best_paid = min(paid, key=lambda m: paid[m])
+    ours_paid = float(np.median([r.paid_full_runs for r in results['dq_simplified']])) \
+        if 'dq_simplified' in results else math.inf
     return {'peer_medians': medians, 'best_peer': best, 'peer_best_full_runs': value,
+            'peer_paid_medians': paid, 'best_paid_peer': best_paid,
+            'peer_best_paid_full_runs': paid[best_paid], 'ours_paid_full_runs': ours_paid,
+            'paid_ratio_vs_best_peer': run_ratio(paid[best_paid], ours_paid),
             'full_runs_ratio_vs_best_peer': run_ratio(value, ours),
             'full_runs_ratio_vs_best_peer_with_calibration': run_ratio(
                 value, ours + calibration_runs)}
@@ -660,11 +741,12 @@ def pick_slsqp_variant(variants: Mapping[str, Sequence[StartResult]]) -> str:
 
 def run_benchmark(scenario: str, n_vars: int, integrator: str, reference: Reference,
                   slsqp_steps: Mapping[str, float] | None = None,
-                  calibration_samples: int = CALIBRATION_SAMPLES,
+                  calibration_samples: int | None = None,
                   starts: Sequence[tuple[str, Array]] | None = None,
                   log: Callable[[str], None] | None = None,
                   peers: Sequence[str] = (), budget: int = PEER_BUDGET,
-                  stop_when_solved: bool = False, jobs: int = 1) -> dict[str, Any]:
+                  stop_when_solved: bool = False, jobs: int = 1,
+                  baselines: bool = True) -> dict[str, Any]:
     """Every method from every start on one model, judged against the reference.
 
     Dynamic-Q with simplified gradients (one eq. 25 calibration of
@@ -675,7 +757,8 @@ def run_benchmark(scenario: str, n_vars: int, integrator: str, reference: Refere
     budget; ``stop_when_solved`` ends a peer's run at its first solved design.  With
     ``jobs`` > 1 the peers' runs go to that many worker processes while this one runs
     the rest (the figures do not depend on it: every method and model is
-    deterministic, Optuna's sampler seeded).
+    deterministic, Optuna's sampler seeded).  ``baselines`` False leaves out Dynamic-Q
+    with full-model gradients and SLSQP (no ``ratios``, ``slsqp`` None).
 
     Returns
     -------
@@ -699,18 +782,26 @@ def run_benchmark(scenario: str, n_vars: int, integrator: str, reference: Refere
                                               stop_when_solved)
                    for peer in peers for label, x0 in starts}
     slsqp_steps = {'slsqp': common.SLSQP_EPS} if slsqp_steps is None else slsqp_steps
+    if calibration_samples is None:
+        calibration_samples = BENCH_CALIBRATION_SAMPLES[scenario]
     judge = FixedStepJudge(scenario, n_vars)
     t0 = time.perf_counter()
     scaling = calibrate(scenario, n_vars, n_samples=calibration_samples,
-                        run_full=lambda sc, x: run_scenario(sc, x, integrator=integrator))
+                        run_full=lambda sc, x: run_scenario(sc, x, integrator=integrator)
+                        ) if calibration_samples else None
     cal_wall = time.perf_counter() - t0
     gradient = SimplifiedGradient(scenario, n_vars, scaling, common.FD_STEP)
     shared = dict(judge=judge, starts=starts, log=log)
     results = {
         'dq_simplified': run_starts('dq_simplified', scenario, n_vars, reference, integrator,
-                                    gradient=gradient, **shared),
-        'dq_full': run_starts('dq_full', scenario, n_vars, reference, integrator, **shared),
+                                    gradient=gradient, calibration_samples=calibration_samples,
+                                    **shared),
     }
+    if not baselines:
+        slsqp_steps = {}
+    else:
+        results['dq_full'] = run_starts('dq_full', scenario, n_vars, reference, integrator,
+                                        **shared)
     for name, eps in slsqp_steps.items():
         results[name] = run_starts(name, scenario, n_vars, reference, integrator, eps=eps,
                                    budget=budget, **shared)
@@ -722,15 +813,17 @@ def run_benchmark(scenario: str, n_vars: int, integrator: str, reference: Refere
                     log(start_line(r))
         else:
             results[peer] = run_starts(peer, scenario, n_vars, reference, integrator,
-                                       budget=budget, stop_when_solved=stop_when_solved,
+                                       budget=budget,
+                                       stop_when_solved=stop_when_solved and peer in NO_OWN_STOP,
                                        **shared)
     if pool is not None:
         pool.shutdown()
-    slsqp = pick_slsqp_variant({name: results[name] for name in slsqp_steps})
+    slsqp = pick_slsqp_variant({name: results[name] for name in slsqp_steps}) \
+        if slsqp_steps else None
     summaries = {name: summary(rs) for name, rs in results.items()}
     ours = summaries['dq_simplified']['median_full_runs']
     ratios = {}
-    for label, other in (('slsqp', slsqp), ('dq_full', 'dq_full')):
+    for label, other in ((('slsqp', slsqp), ('dq_full', 'dq_full')) if baselines else ()):
         theirs = summaries[other]['median_full_runs']
         ratios[f'full_runs_ratio_vs_{label}'] = run_ratio(theirs, ours)
         ratios[f'full_runs_ratio_vs_{label}_with_calibration'] = run_ratio(

@@ -1,0 +1,92 @@
+"""The answer checked at a tighter solver tolerance (no rclpy).
+
+An optimiser on a model integrated at a loose error tolerance (a multibody code at its
+default, the built-in variable-step model at Adams' 1e-3) decides feasibility with the
+integrator's bias: on the 4-variable ride the tyre-hop constraints of the noisy model's
+optimum are about 0.015 lower than the converged solution's (docs/noise_study.md).
+:func:`check_design` runs the reported design once more by Dormand-Prince 5(4) at the
+tightened tolerance of config/vehicle.yaml ``integration.check`` (same output grid);
+:func:`suspension_tuning.tuning.check_summary` gives the two verdicts.  The run counts
+as a paid full run.
+An FMU is checked by the tolerance of FMI's ``setupExperiment`` where the FMU supports
+it; this module serves the built-in model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from suspension_tuning.paths import config_dir, read_yaml
+
+
+@dataclass(frozen=True)
+class CheckSettings:
+    """Settings of the check run (config/vehicle.yaml ``integration.check``).
+
+    ``rtol``, ``atol``: DOPRI5's error tolerances; ``gtol``: the check's feasibility
+    tolerance on g; ``continuations``: shifted continuations at most.
+    """
+
+    rtol: float
+    atol: float
+    gtol: float = 5e-3
+    continuations: int = 2
+
+    def __post_init__(self) -> None:
+        """Positive, finite tolerances (ValueError naming the setting)."""
+        for name in ('rtol', 'atol'):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0.0):
+                raise ValueError(f'integration.check.{name} must be positive and finite, '
+                                 f'got {value}')
+
+
+def load_check_settings(path: str | Path | None = None) -> CheckSettings:
+    """The check's tolerances from config/vehicle.yaml (``integration.check``)."""
+    d = read_yaml(Path(path) if path is not None else config_dir() / 'vehicle.yaml')
+    check = d['integration'].get('check')
+    if check is None:
+        raise ValueError('config/vehicle.yaml has no integration.check (rtol, atol)')
+    return CheckSettings(float(check['rtol']), float(check['atol']),
+                         float(check.get('gtol', 5e-3)), int(check.get('continuations', 2)))
+
+
+def check_design(scenario: str, n_vars: int, x: ArrayLike,
+                 settings: CheckSettings | None = None) -> tuple[float, np.ndarray]:
+    """f and g of one normalised design at the check's tighter tolerance (one full run)."""
+    from suspension_tuning.vehicle.params import load_vehicle_params, with_integrator
+    from suspension_tuning.vehicle.scenarios import run_scenario
+
+    settings = load_check_settings() if settings is None else settings
+    params = with_integrator(load_vehicle_params(), 'variable_step', rtol=settings.rtol,
+                             atol=settings.atol)
+    res = run_scenario(scenario, np.asarray(x, float)[None, :], params=params, n_vars=n_vars,
+                       integrator='variable_step')
+    return float(res.f[0]), np.asarray(res.g[0], float).copy()
+
+
+def check_options(scenario: str, n_vars: int, settings: CheckSettings | None = None
+                  ) -> dict[str, Any]:
+    """``tuning.optimise``'s check arguments for the built-in model of a scenario.
+
+    ``check_model`` (designs (1, n) -> ``FullEvaluation`` at the tighter tolerance),
+    ``check_gtol`` and ``check_continuations`` (config/vehicle.yaml ``integration.check``):
+    what the coordinator passes for the built-in model, and an in-process run that
+    must reach the same bits.
+    """
+    from suspension_tuning.tuning import FullEvaluation
+
+    settings = load_check_settings() if settings is None else settings
+
+    def model(designs: ArrayLike) -> FullEvaluation:
+        f, g = check_design(scenario, n_vars, np.atleast_2d(np.asarray(designs, float))[0],
+                            settings)
+        return FullEvaluation(np.array([f]), g[None, :])
+
+    return {'check_model': model, 'check_gtol': settings.gtol,
+            'check_continuations': settings.continuations}
