@@ -44,7 +44,6 @@ from suspension_tuning.optim.correction import CorrectionOptions, SecantCorrecti
 from suspension_tuning.optim.dynamic_q import DynamicQ, DynamicQOptions
 from suspension_tuning.optim.finite_diff import central_difference
 from suspension_tuning.vehicle.design import (
-    VARIABLE_NAMES,
     X_LOWER,
     X_UPPER,
     DesignSpace,
@@ -314,8 +313,7 @@ class TuningRequest:
         if self.scenario not in OPTIMISATION_SCENARIOS:
             raise ValueError(f'unknown scenario {self.scenario!r}; '
                              f'valid: {", ".join(OPTIMISATION_SCENARIOS)}')
-        if self.n_vars not in VARIABLE_NAMES:
-            raise ValueError(f'n_vars must be 2 or 4, got {self.n_vars}')
+        load_design_space().check_size(self.n_vars)
         if self.gradient_source not in GRADIENT_SOURCES:
             raise ValueError(f'unknown gradient source {self.gradient_source!r}; '
                              f'valid: {", ".join(GRADIENT_SOURCES)}')
