@@ -472,6 +472,10 @@ def optimise(request: TuningRequest, full_model: FullModel,
                     if correction is None:
                         correction = SecantCorrection(full.size, n,
                                                       correction_options.min_step)
+                        if correction_options.seed_blind:
+                            seed_blind_columns(correction, terms, x, full, values,
+                                               np.vstack([df, dg]), request.fd_step,
+                                               upper)
                     correction.observe(x, full, values)
                     jac = correction.correct(np.vstack([df, dg]))
                     df, dg = jac[0], jac[1:]
@@ -511,6 +515,26 @@ def optimise(request: TuningRequest, full_model: FullModel,
     result.update(correction=correction.summary() if correction is not None
                   else {'method': 'none'})
     return result
+
+
+def seed_blind_columns(correction: SecantCorrection, terms: _ConstraintTerms, x: Array,
+                       full: Array, values: Array, jacobian: Array, step: float,
+                       upper: Array) -> None:
+    """Seed the correction's columns of the variables no simplified model sees.
+
+    A column of the simplified Jacobian that is exactly zero in every row (a bar in the
+    pitch-plane model, docs/design_space.md) gets one full run at ``x + step e_j``
+    (``- step`` where that leaves the box), counted as a full run of the optimisation.
+    """
+    blind = np.flatnonzero(np.all(np.asarray(jacobian, float) == 0.0, axis=0))
+    if blind.size == 0:
+        return
+    points = np.repeat(x[None, :], blind.size, axis=0)
+    steps = np.where(x[blind] + step <= upper[blind], step, -step)
+    points[np.arange(blind.size), blind] += steps
+    stepped = terms.stacked_values(points)
+    for row, (j, h) in enumerate(zip(blind, steps)):
+        correction.seed_column(int(j), x, float(h), full, stepped[row], values)
 
 
 class _ConstraintTerms:

@@ -348,3 +348,17 @@ def test_the_shipped_ride8_preset_changes_the_full_model_through_every_variable(
         X[i + 1, i] = x0[i] + 0.3
     f = run_scenario('handling', X, n_vars=8).f
     assert np.all(np.abs(f[1:] - f[0]) > 1e-4)
+
+
+def test_tune_start_with_the_eight_names_of_ride8_picks_that_design():
+    # --start with the preset's names and no --n-vars: the size follows from the names;
+    # each value maps by eq. 4 on its own range (dpsf 0.1-3, 0.1-0.6 L, 0-40 kN m/rad)
+    from suspension_tuning.tune import start_point
+    from suspension_tuning.vehicle.design import load_design_space
+
+    names = load_design_space().names(8)
+    values = ['1.55', '1.55', '0.35', '1.55', '1.55', '0.35', '20', '20']
+    x = start_point([f'{n}={v}' for n, v in zip(names, values)], None)
+    np.testing.assert_allclose(x, [0.5] * 8, rtol=1e-12)  # every range's centre
+    with pytest.raises(ValueError, match='missing anti_roll_bar_rear_knm_per_rad'):
+        start_point([f'{n}={v}' for n, v in zip(names[:7], values)], 8)
