@@ -474,8 +474,8 @@ def optimise(request: TuningRequest, full_model: FullModel,
                                                       correction_options.min_step)
                         if correction_options.seed_blind:
                             seed_blind_columns(correction, terms, x, full, values,
-                                               np.vstack([df, dg]), request.fd_step,
-                                               upper)
+                                               np.vstack([df, dg]),
+                                               correction_options.seed_step, upper)
                     correction.observe(x, full, values)
                     jac = correction.correct(np.vstack([df, dg]))
                     df, dg = jac[0], jac[1:]

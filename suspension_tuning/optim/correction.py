@@ -90,11 +90,14 @@ class CorrectionOptions:
     seed_blind : bool
         Seed the columns of variables no simplified model sees with a one-sided
         full-model difference at the first corrected gradient (module notes).
+    seed_step : float
+        The step of that difference, normalised units [E: 0.1, config/optimiser.yaml].
     """
 
     method: str = 'secant'
     min_step: float = 0.004
     seed_blind: bool = True
+    seed_step: float = 0.1
 
     def __post_init__(self) -> None:
         """Check the method and the step."""
@@ -105,6 +108,10 @@ class CorrectionOptions:
                 and self.min_step >= 0):
             raise ValueError(f'correction min_step must be finite and >= 0, got '
                              f'{self.min_step!r}')
+        if not (isinstance(self.seed_step, int | float) and np.isfinite(self.seed_step)
+                and 0 < self.seed_step <= 0.5):
+            raise ValueError(f'correction seed_step must be in (0, 0.5], got '
+                             f'{self.seed_step!r}')
 
     @classmethod
     def from_mapping(cls, options: CorrectionOptions | Mapping[str, Any] | None
