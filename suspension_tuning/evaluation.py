@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from suspension_tuning.metric_names import METRIC_NAMES, TYRES  # noqa: F401
-from suspension_tuning.vehicle.design import VARIABLE_NAMES, DesignSpace, validate_design
+from suspension_tuning.vehicle.design import DesignSpace, load_design_space, validate_design
 from suspension_tuning.vehicle.mixed import run_mixed
 from suspension_tuning.vehicle.params import (
     load_scenarios_config,
@@ -59,19 +59,20 @@ def scenarios() -> tuple[str, ...]:
     return (*MODEL_SCENARIOS, 'mixed')
 
 
-def parse_designs(scenario: str, n_vars: int, flat: Sequence[float]) -> Array:
+def parse_designs(scenario: str, n_vars: int, flat: Sequence[float],
+                  space: DesignSpace | None = None) -> Array:
     """Check a request and reshape its flat, row-major designs to (m, n_vars).
 
     Raises
     ------
     ValueError
-        Unknown scenario, n_vars not 2 or 4, a length that is not a positive multiple
+        Unknown scenario, n_vars not 2 or 4 or a preset's size of ``space`` (default
+        config/design_space.yaml), a length that is not a positive multiple
         of n_vars, NaN or infinite values, or values outside 0.001..1 (eqs. 6, 8).
     """
     if scenario not in scenarios():
         raise ValueError(f'unknown scenario {scenario!r}; valid: {", ".join(scenarios())}')
-    if n_vars not in VARIABLE_NAMES:
-        raise ValueError(f'n_vars must be 2 (eq. 5) or 4 (eq. 7), got {n_vars}')
+    (space if space is not None else load_design_space()).check_size(n_vars)
     values = np.asarray(flat, dtype=float)
     if values.size == 0 or values.size % n_vars:
         raise ValueError(f'designs must hold a positive multiple of n_vars = {n_vars} '

@@ -409,7 +409,7 @@ def _design_plot(out: Path, records: list[dict[str, Any]], best: dict[str, Any] 
     x = np.array([r['x'] for r in records], dtype=float)
     n = x.shape[1]
     try:
-        variables = space.variables(n)
+        variables = list(space.design_variables(n))
         names = space.names(n)
     except ValueError:  # a design the space cannot show (another n): normalised values
         variables, names = [], [f'x{j + 1}' for j in range(n)]
@@ -418,7 +418,7 @@ def _design_plot(out: Path, records: list[dict[str, Any]], best: dict[str, Any] 
         if not variables:
             return np.atleast_2d(xs)
         low, high = space.bounds(n)
-        factors = np.array([1.0 / v.factor for v, _ in variables])
+        factors = np.array([1.0 / v.factor for v in variables])
         return (low + np.atleast_2d(xs) * (high - low)) * factors
 
     values = physical(x)
@@ -443,8 +443,8 @@ def _design_plot(out: Path, records: list[dict[str, Any]], best: dict[str, Any] 
         ax_p.plot(b[0], b[1], 's', markersize=8, color='k', label='baseline')
     if variables:
         low, high = space.bounds(n)
-        ax_p.set_xlim(variables[0][0].in_unit(low[0]), variables[0][0].in_unit(high[0]))
-        ax_p.set_ylim(variables[1][0].in_unit(low[1]), variables[1][0].in_unit(high[1]))
+        ax_p.set_xlim(variables[0].in_unit(low[0]), variables[0].in_unit(high[0]))
+        ax_p.set_ylim(variables[1].in_unit(low[1]), variables[1].in_unit(high[1]))
     ax_p.set_xlabel(names[0])
     ax_p.set_ylabel(names[1])
     ax_p.legend(fontsize=8)

@@ -57,6 +57,7 @@ import math
 import sys
 import threading
 import time
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import rclpy
@@ -112,8 +113,10 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog='tune', description=__doc__.split('\n')[0])
     parser.add_argument('--scenario', default='ride',
                         help="'ride' or 'handling' ('mixed' too with --evaluate)")
-    parser.add_argument('--n-vars', type=int, choices=(2, 4), default=2,
-                        help='2 or 4 design variables')
+    parser.add_argument('--n-vars', type=_number(int, 1, False, 2**32 - 1), default=None,
+                        help='2 or 4 design variables (the paper\'s), or the size of a preset '
+                             'of config/design_space.yaml (8: ride8); default 2, or the size '
+                             'whose names --start gives')
     start = parser.add_mutually_exclusive_group()
     start.add_argument('--x0', type=float, nargs='*', default=[],
                        help='normalised start point (default: centre of the design space)')
@@ -121,7 +124,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                        help='start point in physical units by name, e.g. dpsf=1.2 '
                             'gas_volume_l=0.35 (2 variables) or dpsf_front=... '
                             'gas_volume_front_l=... dpsf_rear=... gas_volume_rear_l=... '
-                            '(4): the names and units of config/design_space.yaml')
+                            '(4), or the names of a preset (8: dpsf_compression_front=... '
+                            'anti_roll_bar_rear_knm_per_rad=...): the names and units of '
+                            'config/design_space.yaml')
     parser.add_argument('--gradient', default='simplified', help="'simplified' or 'full'")
     parser.add_argument('--max-iterations', type=_number(int, 0, False, 2**32 - 1),
                         default=0,
@@ -175,8 +180,11 @@ def goal_road(road: str, repeat: bool = False) -> str:
     return road
 
 
-def start_point(texts: list[str], n_vars: int, space: DesignSpace | None = None) -> list[float]:
+def start_point(texts: list[str], n_vars: int | None,
+                space: DesignSpace | None = None) -> list[float]:
     """The normalised start point of ``--start NAME=VALUE ...`` (physical units).
+
+    ``n_vars`` None: the design size whose names the entries give (else 2).
 
     Raises
     ------
@@ -197,7 +205,27 @@ def start_point(texts: list[str], n_vars: int, space: DesignSpace | None = None)
             raise ValueError(f'--start: {name.strip()} given twice')
         values[name.strip()] = number
     space = space if space is not None else load_design_space()
-    return space.x_from_values(values, n_vars).tolist()
+    return space.x_from_values(values, start_size(values, n_vars, space)).tolist()
+
+
+def start_size(values: Iterable[str], n_vars: int | None, space: DesignSpace) -> int:
+    """``n_vars``, or when None the size whose names ``values`` gives (default 2)."""
+    if n_vars is not None:
+        return int(n_vars)
+    names = set(values)
+    return next((n for n in space.sizes if set(space.names(n)) == names), 2)
+
+
+def design_text(x: Sequence[float], space: DesignSpace | None = None) -> str:
+    """A normalised design by name in physical units (``dpsf_front=1.2 ...``), or '' when
+    the design space does not know its size.
+    """  # noqa: D205
+    space = space if space is not None else load_design_space()
+    try:
+        values = space.physical_values(list(x))
+    except ValueError:
+        return ''
+    return ' '.join(f'{name}={value:.4g}' for name, value in values.items())
 
 
 def format_feedback(feedback: Optimise.Feedback) -> str:
@@ -219,10 +247,11 @@ def format_feedback(feedback: Optimise.Feedback) -> str:
                 f'samples  {c.wall_time_s:6.1f} s')
     latest = feedback.latest
     x = ', '.join(f'{v:.4f}' for v in latest.x)
+    physical = design_text(latest.x)
     return (f'iteration {latest.iteration:3d}  f = {latest.f:9.5f}  '
             f'max violation = {latest.max_violation:8.4f}  move limit = {latest.move_limit:.4f}  '
             f'full runs = {latest.n_full_runs:4d}  simplified runs = '
-            f'{latest.n_simplified_runs:4d}  x = [{x}]')
+            f'{latest.n_simplified_runs:4d}  x = [{x}]' + (f'  {physical}' if physical else ''))
 
 
 def format_result(result) -> str:
@@ -423,6 +452,9 @@ def main(argv: list[str] | None = None) -> int:
         constraints = [ConstraintSpec.parse(text) for text in args.constraint]
         road = goal_road(args.road, args.repeat_road)
         x0 = start_point(args.start, args.n_vars) if args.start else args.x0
+        if args.n_vars is None:
+            args.n_vars = (start_size([t.partition('=')[0].strip() for t in args.start], None,
+                                      load_design_space()) if args.start else 2)
     except ValueError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2

@@ -44,7 +44,6 @@ from suspension_tuning.optim.correction import CorrectionOptions, SecantCorrecti
 from suspension_tuning.optim.dynamic_q import DynamicQ, DynamicQOptions
 from suspension_tuning.optim.finite_diff import central_difference
 from suspension_tuning.vehicle.design import (
-    VARIABLE_NAMES,
     X_LOWER,
     X_UPPER,
     DesignSpace,
@@ -314,8 +313,7 @@ class TuningRequest:
         if self.scenario not in OPTIMISATION_SCENARIOS:
             raise ValueError(f'unknown scenario {self.scenario!r}; '
                              f'valid: {", ".join(OPTIMISATION_SCENARIOS)}')
-        if self.n_vars not in VARIABLE_NAMES:
-            raise ValueError(f'n_vars must be 2 or 4, got {self.n_vars}')
+        load_design_space().check_size(self.n_vars)
         if self.gradient_source not in GRADIENT_SOURCES:
             raise ValueError(f'unknown gradient source {self.gradient_source!r}; '
                              f'valid: {", ".join(GRADIENT_SOURCES)}')
@@ -518,6 +516,10 @@ def _drive(opt: DynamicQ, request: TuningRequest, terms: _ConstraintTerms,
                     if corrections[0] is None:
                         corrections[0] = SecantCorrection(full.size, n,
                                                           correction_options.min_step)
+                        if correction_options.seed_blind:
+                            seed_blind_columns(corrections[0], terms, x, full, values,
+                                               np.vstack([df, dg]),
+                                               correction_options.seed_step, upper)
                     corrections[0].observe(x, full, values)
                     jac = corrections[0].correct(np.vstack([df, dg]))
                     df, dg = jac[0], jac[1:]
@@ -687,6 +689,26 @@ def with_noise_levels(options: Mapping[str, Any] | None, scenario: str,
     if out['noise_f'] <= 0.0 and out['noise_g'] <= 0.0:
         out['noise_f'], out['noise_g'] = noise_levels(scenario, integrator)
     return out
+
+
+def seed_blind_columns(correction: SecantCorrection, terms: _ConstraintTerms, x: Array,
+                       full: Array, values: Array, jacobian: Array, step: float,
+                       upper: Array) -> None:
+    """Seed the correction's columns of the variables no simplified model sees.
+
+    A column of the simplified Jacobian that is exactly zero in every row (a bar in the
+    pitch-plane model, docs/design_space.md) gets one full run at ``x + step e_j``
+    (``- step`` where that leaves the box), counted as a full run of the optimisation.
+    """
+    blind = np.flatnonzero(np.all(np.asarray(jacobian, float) == 0.0, axis=0))
+    if blind.size == 0:
+        return
+    points = np.repeat(x[None, :], blind.size, axis=0)
+    steps = np.where(x[blind] + step <= upper[blind], step, -step)
+    points[np.arange(blind.size), blind] += steps
+    stepped = terms.stacked_values(points)
+    for row, (j, h) in enumerate(zip(blind, steps)):
+        correction.seed_column(int(j), x, float(h), full, stepped[row], values)
 
 
 class _ConstraintTerms:

@@ -112,8 +112,11 @@ def test_out_of_bounds_raises_naming_index_and_value(value):
 
 
 def test_bad_n_vars_raises():
-    with pytest.raises(ValueError, match='2 or 4'):
-        validate_design([0.5, 0.5, 0.5], 3)
+    # 3 is neither the paper's 2 or 4 (section 5.1) nor the size of a shipped preset (8)
+    with pytest.raises(ValueError, match='2 or 4.*preset'):
+        load_design_space().to_physical([0.5, 0.5, 0.5], 3)
+    with pytest.raises(ValueError, match='positive number'):
+        validate_design([0.5], 0)
 
 
 def test_from_physical_rejects_unequal_axles_for_two_variables():

@@ -278,3 +278,87 @@ def test_fmu_coil_sprung_vehicle_optimised_on_its_spring_rate_stays_within_its_b
     assert reported['spring_rate_front_kn_per_m'] == reported['spring_rate_rear_kn_per_m']
     # the reported design's seat W_b RMS came with the result, in m/s^2
     assert 0.02 < result.metrics_best['a_rms_driver_mps2'] < 5.0
+
+
+def _with_variables(entries, presets=None):
+    from suspension_tuning.vehicle.design import load_design_space
+    d = load_design_space().as_dict()
+    d['variables'] = entries
+    d['presets'] = presets or {'p3': [e['name'] for e in entries]}
+    return d
+
+
+BAR = {'name': 'bar_rear', 'target': 'anti_roll_bar', 'axle': 'rear', 'unit': 'kN.m/rad',
+       'low': 0.0, 'high': 40.0, 'baseline': 15.0}
+REBOUND = {'name': 'reb_front', 'target': 'dpsf_rebound', 'axle': 'front', 'unit': '-',
+           'low': 0.1, 'high': 3.0, 'baseline': 1.0}
+COMP = {'name': 'comp_front', 'target': 'dpsf_compression', 'axle': 'front', 'unit': '-',
+        'low': 0.1, 'high': 3.0, 'baseline': 1.0}
+
+
+@pytest.mark.parametrize('change, key', [
+    ({'target': 'spring_preload'}, r'variables\[0\] \(bar_rear\)\.target: unknown target'),
+    ({'low': 40.0}, r'variables\[0\] \(bar_rear\)\.low: empty or invalid range'),
+    ({'baseline': 50.0}, r'variables\[0\] \(bar_rear\)\.baseline: 50 lies outside'),
+    ({'unit': 'N/m'}, r'variables\[0\] \(bar_rear\)\.unit'),
+])
+def test_a_bad_variable_is_refused_naming_its_key(change, key):
+    from suspension_tuning.vehicle.design import DesignSpace
+    d = _with_variables([{**BAR, **change}, REBOUND, COMP])
+    with pytest.raises(ValueError, match=key):
+        DesignSpace.from_mapping(d, 'config/design_space.yaml')
+
+
+def test_a_bad_preset_is_refused_naming_its_key():
+    from suspension_tuning.vehicle.design import DesignSpace
+    with pytest.raises(ValueError, match=r'presets\.p3: unknown variable'):
+        DesignSpace.from_mapping(_with_variables([BAR, REBOUND, COMP],
+                                                 {'p3': ['bar_rear', 'reb_front', 'x']}))
+    with pytest.raises(ValueError, match=r"presets\.p2: 2 variables: 2 and 4 are the paper"):
+        DesignSpace.from_mapping(_with_variables([BAR, REBOUND, COMP],
+                                                 {'p2': ['bar_rear', 'reb_front']}))
+
+
+def test_a_preset_maps_x_to_its_targets_and_back():
+    # eq. 4 per variable; a bar range may start at 0 (an axle without a bar)
+    from suspension_tuning.vehicle.design import DesignSpace
+    space = DesignSpace.from_mapping(_with_variables([BAR, REBOUND, COMP]))
+    assert space.sizes == (2, 3, 4)
+    assert space.names(3) == ('bar_rear_knm_per_rad', 'reb_front', 'comp_front')
+    x = np.array([0.5, 0.25, 0.75])
+    settings = space.to_physical(x)
+    assert settings.anti_roll_bar('rear')[0] == pytest.approx(20e3)  # 0.5 x 40 kN m/rad
+    assert settings.anti_roll_bar('front') is None  # config/vehicle.yaml's bar
+    assert settings.dpsf_rebound('front')[0] == pytest.approx(0.1 + 0.25 * 2.9)
+    assert settings.dpsf('front')[0] == pytest.approx(0.1 + 0.75 * 2.9)
+    assert settings.dpsf_rebound('rear')[0] == pytest.approx(1.0)  # damper baseline
+    np.testing.assert_allclose(space.from_physical(settings, 3)[0], x)
+    assert space.x_from_values(space.physical_values(x), 3) == pytest.approx(x)
+
+
+def test_the_shipped_ride8_preset_changes_the_full_model_through_every_variable():
+    # each of the 8 variables moved by 0.3 (normalised) from the baseline changes the
+    # full model's handling f (eq. 10): the split damper, gas volumes and both bars
+    # all reach the model (none is silently dropped)
+    from suspension_tuning.vehicle.design import load_design_space
+    from suspension_tuning.vehicle.scenarios import run_scenario
+    x0 = load_design_space().baseline_x(8)
+    X = np.tile(x0, (9, 1))
+    for i in range(8):
+        X[i + 1, i] = x0[i] + 0.3
+    f = run_scenario('handling', X, n_vars=8).f
+    assert np.all(np.abs(f[1:] - f[0]) > 1e-4)
+
+
+def test_tune_start_with_the_eight_names_of_ride8_picks_that_design():
+    # --start with the preset's names and no --n-vars: the size follows from the names;
+    # each value maps by eq. 4 on its own range (dpsf 0.1-3, 0.1-0.6 L, 0-40 kN m/rad)
+    from suspension_tuning.tune import start_point
+    from suspension_tuning.vehicle.design import load_design_space
+
+    names = load_design_space().names(8)
+    values = ['1.55', '1.55', '0.35', '1.55', '1.55', '0.35', '20', '20']
+    x = start_point([f'{n}={v}' for n, v in zip(names, values)], None)
+    np.testing.assert_allclose(x, [0.5] * 8, rtol=1e-12)  # every range's centre
+    with pytest.raises(ValueError, match='missing anti_roll_bar_rear_knm_per_rad'):
+        start_point([f'{n}={v}' for n, v in zip(names[:7], values)], 8)

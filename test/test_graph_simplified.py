@@ -116,3 +116,40 @@ def test_gradient_service_errors_and_calibration_cache(graph, monkeypatch):
     # 2n stencil runs and x itself; the values at x are eq. 25 of the model's values
     assert good.success and len(good.df) == 2 and good.n_model_runs == 5
     assert len(good.values) == 1 + good.n_constraints
+
+
+def test_an_eight_variable_goal_reports_every_variable_by_name_and_unit_and_moves_the_bar(
+        graph):
+    # the ride8 preset of config/design_space.yaml on the handling scenario: compression,
+    # rebound and gas volume per axle and both anti-roll bars.  The full model says a
+    # stiffer rear bar lowers f_hand (eq. 10) at the baseline (15 -> 40 kN m/rad: f 1.14
+    # -> 0.84, docs/design_space.md), and the handling model sees the design's bars
+    from rclpy.action import ActionClient
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning.tune import format_feedback
+    from suspension_tuning.vehicle.design import load_design_space
+
+    space = load_design_space()
+    x0 = space.baseline_x(8)
+    client = ActionClient(graph['client'], Optimise, '/coordinator/optimise')
+    assert client.wait_for_server(timeout_sec=10.0)
+    feedback = []
+    handle = wait(client.send_goal_async(
+        Optimise.Goal(scenario='handling', n_vars=8, x0=x0.tolist(),
+                      gradient_source='simplified', max_iterations=3),
+        feedback_callback=feedback.append))
+    result = wait(handle.get_result_async()).result
+    names = space.names(8)
+    assert list(result.physical_names) == list(names)
+    assert len(names) == 8 and 'anti_roll_bar_rear_knm_per_rad' in names
+    assert list(result.physical_units) == ['-', '-', 'L', '-', '-', 'L', 'kN.m/rad',
+                                           'kN.m/rad']
+    assert len(result.x) == 8 and len(result.baseline_physical_values) == 8
+    values = dict(zip(result.physical_names, result.physical_values))
+    baseline = dict(zip(result.physical_names, result.baseline_physical_values))
+    assert baseline['anti_roll_bar_rear_knm_per_rad'] == pytest.approx(15.0)  # vehicle.yaml
+    assert values['anti_roll_bar_rear_knm_per_rad'] > baseline['anti_roll_bar_rear_knm_per_rad']
+    assert result.f < result.baseline_f
+    lines = [format_feedback(m.feedback) for m in feedback if m.feedback.phase == 'iteration']
+    assert lines and all('anti_roll_bar_front_knm_per_rad=' in line for line in lines)

@@ -252,9 +252,22 @@ def _corners(value: Any, quantity: str, where: str,
 
 
 def design_quantities(space: DesignSpace) -> dict[str, str]:
-    """The design section's keys (``dpsf_front``, ``gas_volume_front``...) and quantities."""
+    """The design section's required keys (``dpsf_front``, ``gas_volume_front``...).
+
+    With their quantities: the paper's variables, which every design size sets.
+    """
     return {var.key(axle): var.quantity for axle in ('front', 'rear')
             for var in (space.damper, space.spring)}
+
+
+def optional_design_quantities(space: DesignSpace) -> dict[str, str]:
+    """The design section's optional keys: the design space's ``variables`` by name.
+
+    With their quantities (``anti_roll_bar_rear``: torsional_stiffness...).  A design of
+    a preset needs each of its variables mapped.
+    """
+    from suspension_tuning.vehicle.design import TARGETS
+    return {v.name: TARGETS[v.target][0] for v in space.catalogue}
 
 
 def _linear_map(d: dict, where: str) -> VariableRef:
@@ -280,12 +293,14 @@ def _linear_map(d: dict, where: str) -> VariableRef:
 
 
 def _design(value: Any, where: str, space: DesignSpace) -> dict[str, VariableRef]:
-    quantities = design_quantities(space)
+    required = design_quantities(space)
+    quantities = {**required, **{k: q for k, q in optional_design_quantities(space).items()
+                                 if k not in required}}
     keys = tuple(quantities)
-    d = _keys(value, where, keys, keys)
+    d = _keys(value, where, keys, tuple(required))
     problems = _Problems()
     refs = {}
-    for k in keys:
+    for k in (k for k in keys if k in d):
         if isinstance(d[k], dict) and ('scale' in d[k] or 'offset' in d[k]):
             refs[k] = problems.take(_linear_map, d[k], f'{where}.{k}')
         else:

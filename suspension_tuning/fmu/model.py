@@ -132,8 +132,9 @@ class FmuModel:
         self.mapping = mapping if isinstance(mapping, FmuMapping) else load_mapping(mapping)
         #: The design space that turns normalised designs into the FMU's parameters.
         self.space = self.mapping.space or design_mod.load_design_space()
-        keyed = {var.key(axle): var for axle in design_mod.AXLES
-                 for var in (self.space.damper, self.space.spring)}
+        keyed: dict[str, Any] = {var.key(axle): var for axle in design_mod.AXLES
+                                 for var in (self.space.damper, self.space.spring)}
+        keyed.update({v.name: v for v in self.space.catalogue if v.name not in keyed})
         if not self.path.is_file():
             raise FmuConfigError(f'fmu_path {self.path}: no such file')
         try:
@@ -353,6 +354,8 @@ class FmuModel:
         """
         ranges = {var.key(axle): (var.axle(axle).low, var.axle(axle).high)
                   for axle in design_mod.AXLES for var in (self.space.damper, self.space.spring)}
+        ranges.update({v.name: (v.low, v.high) for v in self.space.catalogue
+                       if v.name not in ranges})
         out, seen = [], set()
         for name, sm in self.mapping.scenarios.items():
             for key, ref in sm.design.items():
@@ -492,11 +495,30 @@ class FmuModel:
 
     def _parameter_values(self, sm: ScenarioMapping, x: np.ndarray) -> list[dict]:
         """FMU parameter values (FMU units) of each design: fixed, speed, design."""
-        phys = self.space.to_physical(x, x.shape[1])
+        n = x.shape[1]
+        phys = self.space.to_physical(x, n)
         si = {}
         for axle in design_mod.AXLES:
             si[self.space.damper.key(axle)] = phys.dpsf(axle)
             si[self.space.spring.key(axle)] = phys.spring(axle)
+        # the variables of the design space: a preset's from x (eq. 4), the others at
+        # their baselines.  The design's own variables (``driven``) set their parameters
+        # first; a key at its baseline does not override a parameter one of them sets.
+        driven = set(si)
+        for v in self.space.catalogue:  # one named as a paper key (gas_volume_front) is it
+            if v.name not in si:
+                si[v.name] = np.full(len(x), v.baseline)
+        if n in self.space.presets:
+            low, high = self.space.bounds(n)
+            values = design_mod.denormalise(x, low, high)
+            for j, v in enumerate(self.space.presets[n][1]):
+                if v.name not in sm.design:
+                    raise ValueError(f'scenario {sm.name}: the {n}-variable design '
+                                     f'({self.space.presets[n][0]}) sets {v.name}, which the '
+                                     'mapping\'s design section does not map to an FMU '
+                                     'parameter (docs/fmu.md)')
+                si[v.name] = values[:, j]
+            driven = {v.name for v in self.space.presets[n][1]}
         conv = self.conversions[sm.name]
         out = []
         for i in range(len(x)):
@@ -505,7 +527,9 @@ class FmuModel:
                 values[sm.speed_parameter.name] = conv['speed_parameter'].to_fmu(
                     sm.speed_kmh / 3.6)
             designed: dict[str, float] = {}
-            for key, ref in sm.design.items():
+            for key, ref in sorted(sm.design.items(), key=lambda item: item[0] not in driven):
+                if key not in driven and ref.name in designed:
+                    continue  # a parameter the design's own variables set already
                 value = float(conv[f'design.{key}'].to_fmu(si[key][i]))
                 if ref.name in designed and not np.isclose(designed[ref.name], value,
                                                            rtol=1e-12, atol=0.0):

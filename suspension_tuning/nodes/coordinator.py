@@ -88,6 +88,11 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 
 
+def physical_units(n_vars: int) -> list[str]:
+    """The unit of each physical name of an n-variable design (config/design_space.yaml)."""
+    return list(load_design_space().physical_units(n_vars))
+
+
 def code_version() -> str:
     """``git describe`` of the source tree, or the package version outside git."""
     try:
@@ -159,6 +164,7 @@ def action_result(result: Any, history: list[IterationRecord], t0: float,
             success=False, message=stop, x=x,
             constraint_gradient_sources=list(result.constraint_gradient_sources),
             physical_names=list(physical), physical_values=list(physical.values()),
+            physical_units=physical_units(len(x)),
             iterations=int(result.get('nit', 0)), history=history,
             wall_time_s=time.monotonic() - t0, **counter.as_dict())
     physical = physical_settings(design.x)
@@ -170,6 +176,7 @@ def action_result(result: Any, history: list[IterationRecord], t0: float,
         constraint_values=design.constraint_values,
         constraint_gradient_sources=list(result.constraint_gradient_sources),
         physical_names=list(physical), physical_values=list(physical.values()),
+        physical_units=physical_units(len(design.x)),
         iterations=int(result.nit), history=history, wall_time_s=time.monotonic() - t0,
         **counter.as_dict())
     scenario = str(result.get('scenario', ''))
@@ -640,7 +647,8 @@ class CoordinatorNode(Node):
             x=x.tolist(), f=float(response.f[0]), g=g.tolist(),
             feasible=violation <= self.options.gtol, best_iteration=0,
             max_violation=violation, physical_names=list(physical),
-            physical_values=list(physical.values()), iterations=0, history=[record],
+            physical_values=list(physical.values()), physical_units=physical_units(len(x)),
+            iterations=0, history=[record],
             wall_time_s=time.monotonic() - t0, model_fingerprint=fingerprint,
             **counter.as_dict())
         set_metrics(message, goal.scenario, reported=physical_metrics(

@@ -50,7 +50,7 @@ from suspension_tuning.optim.simplified_gradient import (
     calibration_settings,
     fit_calibration,
 )
-from suspension_tuning.vehicle.design import VARIABLE_NAMES, validate_design
+from suspension_tuning.vehicle.design import load_design_space, validate_design
 from suspension_tuning.vehicle.road import road_identity
 
 SCENARIOS = ('ride', 'handling')
@@ -215,8 +215,7 @@ class GradientEvaluatorNode(Node):
     def _check(scenario: str, n_vars: int) -> tuple[str, int]:
         if scenario not in SCENARIOS:
             raise ValueError(f'unknown scenario {scenario!r}; valid: {", ".join(SCENARIOS)}')
-        if int(n_vars) not in VARIABLE_NAMES:
-            raise ValueError(f'n_vars must be 2 or 4, got {n_vars}')
+        load_design_space().check_size(int(n_vars))
         return scenario, int(n_vars)
 
     def destroy_node(self) -> None:

@@ -42,6 +42,13 @@ Choices [E], with the reasons:
   below which Dynamic-Q stops (1e-3).
 * Rows without a simplified model (extra constraints whose gradients come from
   full-model central differences) are exact already and are left alone.
+* Variables no simplified model sees (an anti-roll bar in the pitch-plane model: the
+  column of the simplified Jacobian is exactly zero in every row) would never be
+  learnt: the optimiser never steps along them, so no secant has a component there.
+  Their columns are seeded once, at the first corrected gradient, with a one-sided
+  full-model difference of the discrepancy (one full run per such variable, counted;
+  :meth:`SecantCorrection.seed_column`), and the secant updates refine them from then
+  on.  Option ``seed_blind`` (default true).
 
 References
 ----------
@@ -80,10 +87,17 @@ class CorrectionOptions:
     min_step : float
         Steps shorter than this (Euclidean norm, normalised design units) do not
         update the correction [E: 0.004, module notes].
+    seed_blind : bool
+        Seed the columns of variables no simplified model sees with a one-sided
+        full-model difference at the first corrected gradient (module notes).
+    seed_step : float
+        The step of that difference, normalised units [E: 0.1, config/optimiser.yaml].
     """
 
     method: str = 'secant'
     min_step: float = 0.004
+    seed_blind: bool = True
+    seed_step: float = 0.1
 
     def __post_init__(self) -> None:
         """Check the method and the step."""
@@ -94,6 +108,10 @@ class CorrectionOptions:
                 and self.min_step >= 0):
             raise ValueError(f'correction min_step must be finite and >= 0, got '
                              f'{self.min_step!r}')
+        if not (isinstance(self.seed_step, int | float) and np.isfinite(self.seed_step)
+                and 0 < self.seed_step <= 0.5):
+            raise ValueError(f'correction seed_step must be in (0, 0.5], got '
+                             f'{self.seed_step!r}')
 
     @classmethod
     def from_mapping(cls, options: CorrectionOptions | Mapping[str, Any] | None
@@ -145,7 +163,23 @@ class SecantCorrection:
         self.min_step = float(min_step)
         self.n_updates = 0
         self.n_short_steps = 0
+        self.seeded: list[int] = []
         self._last: tuple[Array, Array] | None = None
+
+    def seed_column(self, j: int, x: ArrayLike, step: float, full_at_x: ArrayLike,
+                    full_at_step: ArrayLike, simplified_at_x: ArrayLike) -> None:
+        """Set column j from a full run at ``x + step e_j`` (a variable the simplified
+        models do not see: their slope along it is zero, so D's slope is F's).
+
+        Rows without a simplified model (NaN in ``simplified_at_x``) stay zero.
+        """  # noqa: D205
+        full0 = np.asarray(full_at_x, dtype=float)
+        full1 = np.asarray(full_at_step, dtype=float)
+        simp = np.asarray(simplified_at_x, dtype=float)
+        if float(step) == 0.0 or full0.shape != full1.shape or full0.shape != simp.shape:
+            raise ValueError('correction: seed needs a non-zero step and values of one shape')
+        self.jacobian[:, int(j)] = np.where(np.isfinite(simp), (full1 - full0) / step, 0.0)
+        self.seeded.append(int(j))
 
     def observe(self, x: ArrayLike, full_values: ArrayLike, simplified_values: ArrayLike
                 ) -> bool:
@@ -199,5 +233,5 @@ class SecantCorrection:
     def summary(self) -> dict[str, Any]:
         """Updates made, short steps skipped and the estimate (for results and bags)."""
         return {'method': 'secant', 'min_step': self.min_step, 'n_updates': self.n_updates,
-                'n_short_steps': self.n_short_steps,
+                'n_short_steps': self.n_short_steps, 'seeded_columns': list(self.seeded),
                 'jacobian': self.jacobian.tolist()}

@@ -25,7 +25,7 @@ simplified values over the samples, ``1 - sum (F_A - F_s)^2 / sum (F_A - mean F_
 (NaN when the full values are constant); ``r2_linear`` is the squared Pearson correlation
 (the best any affine map could reach).
 
-Sampling (:func:`sample_design_space`): the 2^n corners of the box, then a seeded
+Sampling (:func:`sample_design_space`): the 2^n corners of the box (when all fit), then a seeded
 maximin Latin hypercube (best of ``candidates`` scipy ``qmc.LatinHypercube`` designs by
 the smallest distance to each other and to the corners) for the remaining samples, all
 mapped to ``[X_LOWER, X_UPPER]``.  Deterministic for a given seed.
@@ -84,7 +84,8 @@ def sample_design_space(
     seed : int
         Seed of the Latin hypercubes.
     include_corners : bool
-        Put the 2^n corners first.
+        Put the 2^n corners first, when all of them fit in ``n_samples`` (else the
+        samples are the Latin hypercube alone).
     candidates : int
         Latin hypercubes tried for the maximin criterion.
 
@@ -97,7 +98,9 @@ def sample_design_space(
     if n_samples < 2:
         raise ValueError(f'n_samples must be >= 2, got {n_samples}')
     corners = np.empty((0, n_vars))
-    if include_corners:
+    # the corners only where they all fit: 2^n of them (n = 8: 256) would otherwise be
+    # a biased handful of corners (the first variables all at their low end)
+    if include_corners and 2 ** n_vars <= n_samples:
         grid = np.array(np.meshgrid(*[[X_LOWER, X_UPPER]] * n_vars, indexing='ij'))
         corners = grid.reshape(n_vars, -1).T[:n_samples]
     n_lhs = n_samples - corners.shape[0]

@@ -63,6 +63,7 @@ from suspension_tuning.vehicle.design import (
     X_LOWER,
     X_UPPER,
     baseline_design,
+    load_design_space,
     validate_design,
 )
 from suspension_tuning.vehicle.scenarios import run_scenario
@@ -820,6 +821,7 @@ def write_bag(path: Path, run: StudyRun, recorder: Recorder) -> Path:
         max_violation=float(run.max_violation),
         physical_names=list(physical),
         physical_values=list(physical.values()),
+        physical_units=list(load_design_space().physical_units(len(run.x))),
         iterations=run.iterations,
         n_full_runs=run.n_full_runs,
         n_simplified_runs=run.n_simplified_runs,

@@ -20,7 +20,9 @@ Corners: 0 FL, 1 FR, 2 RL, 3 RR.  ISO axes: x forward, y left, z up; roll positi
 left side up, pitch positive = nose down, yaw positive = to the left.
 
 Strut state ``ss`` (4, N_SS) per corner: K_sum (sum of connected K_j = V_j p_j^(1/n)),
-V_ref (connected gas volume at zero stroke), V_guard (guard volume), dpsf.
+V_ref (connected gas volume at zero stroke), V_guard (guard volume), dpsf (compression
+half of the damper table), dpsf of the rebound half, the anti-roll-bar stiffness of the
+corner's axle (N m/rad; a design may set it, so it is per design, not in ``P``).
 
 Inputs ``u_in`` (N_IN,): commanded steer angle, drive force.
 
@@ -47,8 +49,8 @@ COUPLED = np.array([0, 1, 5, 6, 8, 10])  # v, r, phi_f, phi_r, phiaf, phiar
 UNCOUPLED = np.array([2, 3, 4, 7, 9])  # u, zs, theta, zaf, zar
 
 # ---- strut state ----------------------------------------------------------------------
-SS_KSUM, SS_VREF, SS_VGUARD, SS_DPSF = 0, 1, 2, 3
-N_SS = 4
+SS_KSUM, SS_VREF, SS_VGUARD, SS_DPSF, SS_DPSF_REB, SS_KARB = 0, 1, 2, 3, 4, 5
+N_SS = 6
 
 # ---- inputs ---------------------------------------------------------------------------
 IN_DELTA_CMD, IN_FDRIVE = 0, 1
@@ -349,7 +351,9 @@ def deriv(
             p -= P[P_N] * p / vv * (vc - vg)
         press[i] = p
         f_gas = (p - P[P_PATM]) * P[P_AP]
-        f_damp = -ss[i, SS_DPSF] * _hermite(-xd_s, dk, dv, ds)
+        # compression (xd_s > 0) scales with dpsf, rebound with its own factor
+        f_damp = -(ss[i, SS_DPSF] if xd_s > 0.0 else ss[i, SS_DPSF_REB]) * _hermite(
+            -xd_s, dk, dv, ds)
         db = _pen(x_s - P[P_BCL], P[P_BS])
         dr = _pen(-x_s - P[P_RCL], P[P_RS])
         f_stop = (P[P_BK] * db + P[P_BK3] * db * db * db) - (
@@ -401,8 +405,8 @@ def deriv(
     phfd = s[I_VEL0 + 2]
     phrd = s[I_VEL0 + 3]
     m_tor = P[P_KTOR] * (phr - phf) + P[P_CTOR] * (phrd - phfd)
-    arb_f = P[P_KARBF] * (phf - s[I_PAF])
-    arb_r = P[P_KARBR] * (phr - s[I_PAR])
+    arb_f = ss[0, SS_KARB] * (phf - s[I_PAF])
+    arb_r = ss[2, SS_KARB] * (phr - s[I_PAR])
     ur = u * r
     rhs[0] = sum_fy_b_f + sum_fy_b_r - P[P_MV] * ur
     rhs[1] = mz

@@ -27,8 +27,10 @@ from ._kernel import _hermite, _pacejka, _pen
 # ---- strut parameter block ------------------------------------------------------------
 S_AP, S_N, S_PATM, S_BCL, S_BK, S_BK3, S_BS, S_RCL, S_RK, S_RK3, S_RS = range(11)
 N_SP = 11
-SS_K, SS_V, SS_VG, SS_DPSF, SS_KC, SS_F0 = 0, 1, 2, 3, 4, 5
-N_SS = 6
+# per axle: K, V_s, guard volume, dpsf (compression half), coil rate, static load, dpsf of
+# the rebound half, anti-roll-bar stiffness N m/rad (the handling model's roll moment)
+SS_K, SS_V, SS_VG, SS_DPSF, SS_KC, SS_F0, SS_DPSF_REB, SS_KARB = 0, 1, 2, 3, 4, 5, 6, 7
+N_SS = 8
 
 # ---- pitch-plane parameters (after the strut block) ----------------------------------
 (PP_G, PP_A, PP_B, PP_MB, PP_IY, PP_MAF, PP_MAR, PP_KT, PP_CT, PP_DSTF, PP_DSTR, PP_XD, PP_XP) = (
@@ -57,11 +59,10 @@ N_PP_OUT = 8
     HP_SHR,
     HP_WAF,
     HP_WAR,
-    HP_KARB,
     HP_GRAV,
     HP_OWNSLIP,
-) = range(N_SP, N_SP + 17)
-N_HP = N_SP + 17
+) = range(N_SP, N_SP + 16)
+N_HP = N_SP + 16
 # handling state: y, psi, v, r, phi, phi_dot (phi positive = left side up)
 N_H_STATE = 6
 # handling outputs per step: roll, roll rate, lateral acceleration, 4 Fz, 4 Fy
@@ -82,7 +83,8 @@ def _strut(x, xd, ss_ax, sp, dk, dv, ds):
         if vc < vg:
             p -= sp[S_N] * p / vv * (vc - vg)
         f_gas = (p - sp[S_PATM]) * sp[S_AP]
-    f_damp = -ss_ax[SS_DPSF] * _hermite(-xd, dk, dv, ds)
+    # compression (xd > 0) scales with dpsf, rebound with its own factor
+    f_damp = -(ss_ax[SS_DPSF] if xd > 0.0 else ss_ax[SS_DPSF_REB]) * _hermite(-xd, dk, dv, ds)
     db = _pen(x - sp[S_BCL], sp[S_BS])
     dr = _pen(-x - sp[S_RCL], sp[S_RS])
     f_stop = (sp[S_BK] * db + sp[S_BK3] * db * db * db) - (
@@ -353,7 +355,8 @@ def h_deriv(s, ss, P, dk, dv, ds, pc, slip, delta, d, out, want):
     ay = sum_fy / P[HP_MV]  # eq. 13
     rd = (a * (fy0 + fy1) - b * (fy2 + fy3)) / P[HP_IZ]  # eq. 12
     mx = (fl - fr) * ts2 + P[HP_H] * sum_fy * P[HP_MB] / P[HP_MV]  # eq. 14
-    mx += P[HP_GRAV] * P[HP_MB] * P[HP_G] * P[HP_H] * math.sin(phi) - P[HP_KARB] * phi
+    mx += (P[HP_GRAV] * P[HP_MB] * P[HP_G] * P[HP_H] * math.sin(phi)
+           - (ss[0, SS_KARB] + ss[1, SS_KARB]) * phi)
     d[0] = u * math.sin(s[1]) + v * math.cos(s[1])
     d[1] = r
     d[2] = ay - u * r

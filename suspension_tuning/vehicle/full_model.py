@@ -96,24 +96,42 @@ class SuspensionSetting:
     gas_volume_stiff_m3 : np.ndarray
         Static gas volume of the small accumulator alone (stiff spring) [m^3].
     dpsf_low, dpsf_high : np.ndarray
-        Damper scale factors of the low-damping (bypass open) and high-damping states [-].
+        Damper scale factors of the low-damping (bypass open) and high-damping states [-]:
+        of the compression half of the table when the rebound factors are given, else of
+        the whole table.
+    dpsf_low_rebound, dpsf_high_rebound : np.ndarray or None
+        Scale factors of the rebound half of the table in each damping state [-]; None:
+        as ``dpsf_low`` and ``dpsf_high``.
+    arb_nm_per_rad : np.ndarray or None
+        Anti-roll-bar stiffness per design and axle [N m/rad]; None: config/vehicle.yaml's.
     """
 
     gas_volume_soft_m3: np.ndarray
     gas_volume_stiff_m3: np.ndarray
     dpsf_low: np.ndarray
     dpsf_high: np.ndarray
+    dpsf_low_rebound: np.ndarray | None = None
+    dpsf_high_rebound: np.ndarray | None = None
+    arb_nm_per_rad: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         """Validate shapes and values (ValueError naming the field)."""
         shape = np.shape(self.gas_volume_soft_m3)
-        for name in ('gas_volume_soft_m3', 'gas_volume_stiff_m3', 'dpsf_low', 'dpsf_high'):
+        if self.dpsf_low_rebound is None:
+            object.__setattr__(self, 'dpsf_low_rebound', self.dpsf_low)
+        if self.dpsf_high_rebound is None:
+            object.__setattr__(self, 'dpsf_high_rebound', self.dpsf_high)
+        for name in ('gas_volume_soft_m3', 'gas_volume_stiff_m3', 'dpsf_low', 'dpsf_high',
+                     'dpsf_low_rebound', 'dpsf_high_rebound', 'arb_nm_per_rad'):
+            if getattr(self, name) is None:
+                continue
             val = np.asarray(getattr(self, name), dtype=float)
             if val.ndim != 2 or val.shape[1] != 2 or val.shape != shape:
                 raise ValueError(
                     f'SuspensionSetting.{name} must have shape (batch, 2), got {val.shape}'
                 )
-            if not np.all(np.isfinite(val)) or np.any(val <= 0):
+            bad = np.any(val < 0) if name == 'arb_nm_per_rad' else np.any(val <= 0)
+            if not np.all(np.isfinite(val)) or bad:
                 raise ValueError(f'SuspensionSetting.{name} must be positive and finite')
             object.__setattr__(self, name, val)
 
@@ -143,7 +161,10 @@ class SuspensionSetting:
         axle_settings : design.AxleSettings
             Physical design (dpsf and gas volume front/rear, each (batch,)); a design
             whose spring is a stiffness is refused (ValueError): the 4S4 strut has gas
-            springs.
+            springs.  Its ``extra`` settings act as their targets say
+            (``design.TARGETS``): a rebound dpsf on the mode's damping state, an
+            anti-roll bar, or one 4S4 state set explicitly (``gas_volume_stiff``,
+            ``dpsf_low``...) whatever the mode.
         mode : {'ride', 'handling'}
             'ride': the design sets the soft gas volume and the low-damping dpsf;
             'handling': the stiff gas volume and the high-damping dpsf.  The other state
@@ -162,11 +183,54 @@ class SuspensionSetting:
             [axle_settings.gas_volume_front_m3, axle_settings.gas_volume_rear_m3], axis=1
         )
         base = cls.baseline(params, dpsf.shape[0])
+        extra = axle_settings.extra
+        if not extra:  # the paper's design (eqs. 4-8)
+            if mode == 'ride':
+                return cls(gvol, np.minimum(base.gas_volume_stiff_m3, gvol), dpsf,
+                           base.dpsf_high)
+            if mode == 'handling':
+                return cls(np.maximum(base.gas_volume_soft_m3, gvol), gvol, base.dpsf_low, dpsf)
+            raise ValueError(f"mode must be 'ride' or 'handling', got {mode!r}")
+        if mode not in ('ride', 'handling'):
+            raise ValueError(f"mode must be 'ride' or 'handling', got {mode!r}")
+
+        def pair(key: str, default: np.ndarray) -> np.ndarray:
+            out = np.array(default, dtype=float)
+            for j, axle in enumerate(('front', 'rear')):
+                if f'{key}_{axle}' in extra:
+                    out[:, j] = extra[f'{key}_{axle}']
+            return out
+
+        rebound = np.stack([axle_settings.dpsf_rebound('front'),
+                            axle_settings.dpsf_rebound('rear')], axis=1)
+        explicit = [k for k in extra if not k.startswith(('dpsf_rebound', 'anti_roll_bar'))]
         if mode == 'ride':
-            return cls(gvol, np.minimum(base.gas_volume_stiff_m3, gvol), dpsf, base.dpsf_high)
-        if mode == 'handling':
-            return cls(np.maximum(base.gas_volume_soft_m3, gvol), gvol, base.dpsf_low, dpsf)
-        raise ValueError(f"mode must be 'ride' or 'handling', got {mode!r}")
+            soft, low, low_reb = gvol, dpsf, rebound
+            stiff, high, high_reb = (base.gas_volume_stiff_m3, base.dpsf_high,
+                                     base.dpsf_high)
+        else:
+            stiff, high, high_reb = gvol, dpsf, rebound
+            soft, low, low_reb = base.gas_volume_soft_m3, base.dpsf_low, base.dpsf_low
+        if explicit:  # a state set explicitly overrides the mode's and the baseline's
+            soft = pair('gas_volume_soft', soft)
+            stiff = pair('gas_volume_stiff', stiff)
+            low, low_reb = np.array(low, dtype=float), np.array(low_reb, dtype=float)
+            high, high_reb = np.array(high, dtype=float), np.array(high_reb, dtype=float)
+            for j, axle in enumerate(('front', 'rear')):
+                for key, comp, reb in (('dpsf_low', low, low_reb),
+                                       ('dpsf_high', high, high_reb)):
+                    if f'{key}_{axle}' in extra:  # both halves of that state's table
+                        comp[:, j] = reb[:, j] = extra[f'{key}_{axle}']
+        if mode == 'ride':
+            stiff = np.minimum(stiff, soft)
+        else:
+            soft = np.maximum(soft, stiff)
+        arb = None
+        if any(k.startswith('anti_roll_bar') for k in extra):
+            arb = pair('anti_roll_bar', np.tile([params.arb_front_nm_per_rad,
+                                                 params.arb_rear_nm_per_rad],
+                                                (dpsf.shape[0], 1)))
+        return cls(soft, stiff, low, high, low_reb, high_reb, arb)
 
 
 @dataclass(frozen=True)
@@ -407,7 +471,7 @@ def generalised_forces_numpy(
     )
     f_s = (
         (p_gas - sp.atmospheric_pressure_pa) * sp.piston_area_m2
-        + strut_mod.damper_force_n(stroke_d, ss[:, :, K.SS_DPSF], sp)
+        + strut_mod.damper_force_n(stroke_d, ss[:, :, K.SS_DPSF], sp, ss[:, :, K.SS_DPSF_REB])
         + strut_mod.stop_force_n(stroke, sp)
     )
     vx = np.maximum(u[:, None] - yw * r[:, None], 0.1)
@@ -424,8 +488,8 @@ def generalised_forces_numpy(
     m_tor = p.torsion_stiffness_nm_per_rad * (phr - phf) + p.torsion_damping_nms_per_rad * (
         phrd - phfd
     )
-    arb_f = p.arb_front_nm_per_rad * (phf - paf)
-    arb_r = p.arb_rear_nm_per_rad * (phr - par)
+    arb_f = ss[:, 0, K.SS_KARB] * (phf - paf)
+    arb_r = ss[:, 2, K.SS_KARB] * (phr - par)
     ur = u * r
     lf = p.roll_centre_front_m - p.axle_height_m
     lr = p.roll_centre_rear_m - p.axle_height_m
@@ -524,6 +588,13 @@ def strut_states(
     ss[:, :, K.SS_DPSF] = np.where(
         high, setting.dpsf_high[:, corner_axle], setting.dpsf_low[:, corner_axle]
     )
+    ss[:, :, K.SS_DPSF_REB] = np.where(
+        high, setting.dpsf_high_rebound[:, corner_axle], setting.dpsf_low_rebound[:, corner_axle]
+    )
+    arb = (setting.arb_nm_per_rad if setting.arb_nm_per_rad is not None
+           else np.tile([params.arb_front_nm_per_rad, params.arb_rear_nm_per_rad],
+                        (setting.batch_size, 1)))
+    ss[:, :, K.SS_KARB] = arb[:, corner_axle]
     return ss, np.stack([k1, k2], axis=2), v_soft - v1
 
 
@@ -949,6 +1020,11 @@ class FullVehicleModel:
                 high_new[:, ca[c]],
                 self.setting.dpsf_high[:, ca[c]],
                 self.setting.dpsf_low[:, ca[c]],
+            )
+            self._ss[:, c, K.SS_DPSF_REB] = np.where(
+                high_new[:, ca[c]],
+                self.setting.dpsf_high_rebound[:, ca[c]],
+                self.setting.dpsf_low_rebound[:, ca[c]],
             )
         self.valves = ValveState(soft_new, high_new)
         self.switch_log.append((self.step_index, soft_new.copy(), high_new.copy()))

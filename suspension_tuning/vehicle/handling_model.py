@@ -46,7 +46,12 @@ from .metrics import (
     soft_tyre_hop_constraints,
 )
 from .params import VehicleParams, load_vehicle_params
-from .pitch_plane import axle_strut_states, load_simplified_config, strut_block
+from .pitch_plane import (
+    axle_bars_nm_per_rad,
+    axle_strut_states,
+    load_simplified_config,
+    strut_block,
+)
 from .tyre import pacejka89_lateral
 
 SLIP_SOURCES = ('full_model', 'own')
@@ -177,7 +182,6 @@ class HandlingModel:
             r_s / (f_s + r_s),
             0.5 * p.mass_axle_front_kg * p.g_mps2,
             0.5 * p.mass_axle_rear_kg * p.g_mps2,
-            (p.arb_front_nm_per_rad + p.arb_rear_nm_per_rad) if opt['anti_roll_bar'] else 0.0,
             1.0 if opt['gravity_roll_moment'] else 0.0,
             1.0 if opt['slip_angles'] == 'own' else 0.0,
         ]
@@ -199,7 +203,8 @@ class HandlingModel:
         """
         if not isinstance(inputs, HandlingInputs):
             raise ValueError(f'inputs must be HandlingInputs, got {type(inputs).__name__}')
-        ss = axle_strut_states(settings, self.params)
+        ss = axle_strut_states(settings.for_mode('handling'), self.params,
+                               vehicle_bars=self.options['anti_roll_bar'])
         b = ss.shape[0]
         m = int(np.floor(self.dt_s / inputs.dt_s * (1.0 + 1e-9)))
         if m > 1 and m % 2:
@@ -337,12 +342,14 @@ def derivative_numpy(
     ts2 = 0.5 * p.strut_track_m
     f_s, r_s = p.static_strut_load_front_n, p.static_strut_load_rear_n
 
+    settings = settings.for_mode('handling')
     coil = settings.spring_quantity == 'stiffness'
 
     def sf(x, xd, axle, load):
         spring = settings.spring(axle)
         return strut_mod.strut_force(x, xd, None if coil else spring, settings.dpsf(axle),
-                                     load, p, spring if coil else None)
+                                     load, p, spring if coil else None,
+                                     settings.dpsf_rebound(axle))
 
     xl, xld = -ts2 * phi, -ts2 * phid
     f_fl = sf(xl, xld, 'front', f_s)
@@ -365,8 +372,8 @@ def derivative_numpy(
     mx = (fl - fr) * ts2 + model.roll_arm_m * fy.sum(0) * p.mass_sprung_kg / p.mass_total_kg
     if model.options['gravity_roll_moment']:
         mx = mx + p.mass_sprung_kg * p.g_mps2 * model.roll_arm_m * np.sin(phi)
-    if model.options['anti_roll_bar']:
-        mx = mx - (p.arb_front_nm_per_rad + p.arb_rear_nm_per_rad) * phi
+    bars = axle_bars_nm_per_rad(settings, p, model.options['anti_roll_bar'])
+    mx = mx - (bars[:, 0] + bars[:, 1]) * phi
     return np.stack(
         [
             speed_mps * np.sin(psi) + v * np.cos(psi),

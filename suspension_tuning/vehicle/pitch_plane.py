@@ -88,8 +88,29 @@ def strut_block(params: VehicleParams) -> np.ndarray:
     )
 
 
-def axle_strut_states(settings: AxleSettings, params: VehicleParams) -> np.ndarray:
-    """Per-design, per-axle strut state (batch, 2, 6): K, V_s, guard volume, dpsf, k, F_s.
+def axle_bars_nm_per_rad(settings: AxleSettings, params: VehicleParams,
+                         vehicle_bars: bool) -> np.ndarray:
+    """Anti-roll-bar stiffness per design and axle (batch, 2), N m/rad.
+
+    The design's bar where it sets one (``AxleSettings.anti_roll_bar``); else
+    config/vehicle.yaml's when ``vehicle_bars`` (the handling model's option
+    ``anti_roll_bar``), else none (the paper's eq. 14 has only the struts).
+    """
+    batch = settings.batch_size
+    out = np.zeros((batch, 2))
+    vehicle = (params.arb_front_nm_per_rad, params.arb_rear_nm_per_rad)
+    for j, axle in enumerate(('front', 'rear')):
+        bar = settings.anti_roll_bar(axle)
+        out[:, j] = bar if bar is not None else (vehicle[j] if vehicle_bars else 0.0)
+    return out
+
+
+def axle_strut_states(settings: AxleSettings, params: VehicleParams,
+                      vehicle_bars: bool = False) -> np.ndarray:
+    """Per-design, per-axle strut state (batch, 2, 8).
+
+    Entries: K, V_s, guard volume, dpsf, k, F_s, rebound dpsf, anti-roll bar
+    (:func:`axle_bars_nm_per_rad`; only the handling model uses it).
 
     Gas spring: ``K = V_s p_s^(1/n)`` with the static pressure of
     ``strut.static_pressure_pa`` at the axle's static strut load, so the gas force equals
@@ -102,6 +123,9 @@ def axle_strut_states(settings: AxleSettings, params: VehicleParams) -> np.ndarr
     dpsf = np.stack([settings.dpsf_front, settings.dpsf_rear], axis=1)
     out = np.zeros(dpsf.shape + (SK.N_SS,))
     out[..., SK.SS_DPSF] = dpsf
+    out[..., SK.SS_DPSF_REB] = np.stack([settings.dpsf_rebound('front'),
+                                         settings.dpsf_rebound('rear')], axis=1)
+    out[..., SK.SS_KARB] = axle_bars_nm_per_rad(settings, params, vehicle_bars)
     if settings.spring_quantity == 'stiffness':
         out[..., SK.SS_KC] = np.stack([settings.spring('front'), settings.spring('rear')], axis=1)
         out[..., SK.SS_F0] = loads
@@ -294,7 +318,7 @@ class PitchPlaneModel:
         PitchPlaneRecord
             Outputs at every step.
         """
-        ss = axle_strut_states(settings, self.params)
+        ss = axle_strut_states(settings.for_mode('ride'), self.params)
         b = ss.shape[0]
         states = np.zeros((b, SK.N_PP_STATE))
         out = np.empty((b, self.n_steps, SK.N_PP_OUT))
@@ -396,6 +420,7 @@ def derivative_numpy(
     np.ndarray
         State derivative (batch, 8).
     """
+    settings = settings.for_mode('ride')
     p = params if params is not None else load_vehicle_params()
     s = np.asarray(state, dtype=float)
     zs, th, zaf, zar, zsd, thd, zafd, zard = s.T
@@ -404,10 +429,12 @@ def derivative_numpy(
     ff = strut_mod.strut_force(
         zaf - (zs - a * th), zafd - (zsd - a * thd), settings.gas_volume_front_m3,
         settings.dpsf_front, p.static_strut_load_front_n, p, settings.stiffness_front_n_per_m,
+        settings.dpsf_rebound('front'),
     )  # fmt: skip
     fr = strut_mod.strut_force(
         zar - (zs + b * th), zard - (zsd + b * thd), settings.gas_volume_rear_m3,
         settings.dpsf_rear, p.static_strut_load_rear_n, p, settings.stiffness_rear_n_per_m,
+        settings.dpsf_rebound('rear'),
     )  # fmt: skip
     k, c = p.tyre.vertical_stiffness_n_per_m, p.tyre.vertical_damping_ns_per_m
     tf = vertical_force(dstf + road[0] - zaf, road[1] - zafd, k, c)

@@ -140,14 +140,20 @@ def hermite_eval(
 
 
 def damper_force_n(
-    stroke_rate_mps: np.ndarray, dpsf: np.ndarray | float, params: StrutParams | VehicleParams
+    stroke_rate_mps: np.ndarray, dpsf: np.ndarray | float, params: StrutParams | VehicleParams,
+    dpsf_rebound: np.ndarray | float | None = None,
 ) -> np.ndarray:
     """Damper force [N], positive pushing apart: ``dpsf x`` standard rear characteristic.
 
     The table is in extension-positive / tension-positive form, so the strut force is
     ``-dpsf F_table(-stroke_rate)`` (paper section 5.1: the shape and switch velocities are
-    kept, only the scale factor changes).
+    kept, only the scale factor changes).  With ``dpsf_rebound`` the two halves of the
+    table scale apart: ``dpsf`` in compression (stroke rate > 0), ``dpsf_rebound`` in
+    rebound (the force is zero at zero rate, so the characteristic stays continuous).
     """
+    if dpsf_rebound is not None:
+        rate = np.asarray(stroke_rate_mps, dtype=float)
+        dpsf = np.where(rate > 0.0, dpsf, dpsf_rebound)
     sp = _strut(params)
     f = hermite_eval(
         -np.asarray(stroke_rate_mps, dtype=float),
@@ -186,6 +192,7 @@ def strut_force(
     static_load_n: np.ndarray,
     params: StrutParams | VehicleParams,
     stiffness_n_per_m: np.ndarray | None = None,
+    dpsf_rebound: np.ndarray | None = None,
 ) -> np.ndarray:
     """Total 4S4 strut force [N] for one connected gas volume and one damper scale.
 
@@ -207,6 +214,8 @@ def strut_force(
     stiffness_n_per_m : np.ndarray, optional
         A coil spring's rate [N/m]: the spring is then linear (:func:`coil_force_n`) and
         ``gas_volume_m3`` is not used.
+    dpsf_rebound : np.ndarray, optional
+        Scale factor of the rebound half of the damper table (default ``dpsf``).
 
     Returns
     -------
@@ -218,7 +227,7 @@ def strut_force(
               else coil_force_n(stroke_m, stiffness_n_per_m, static_load_n))
     return (
         spring
-        + damper_force_n(stroke_rate_mps, dpsf, params)
+        + damper_force_n(stroke_rate_mps, dpsf, params, dpsf_rebound)
         + stop_force_n(stroke_m, params)
     )
 
