@@ -25,6 +25,11 @@ A start point in physical units, by the names of config/design_space.yaml::
 
     tune --scenario ride --n-vars 2 --start dpsf=1.2 gas_volume_l=0.35
 
+Live telemetry for one goal (``ros2 topic hz``, Foxglove's live view): every simulation
+worker's ``telemetry_rate`` set for the goal and set back when ``tune`` ends::
+
+    tune --scenario ride --evaluate --telemetry-rate 1.0
+
 Prints the eq. 25 calibration's progress (full-model samples done of total; the first
 run of a model configuration spends them before its first iteration), then one line
 per Dynamic-Q iteration (iteration, f, largest violation, model runs so far) from the
@@ -64,6 +69,8 @@ import rclpy
 from rclpy.action import ActionClient
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
 from rclpy.signals import SignalHandlerOptions
 from suspension_tuning_interfaces.action import Optimise
 from suspension_tuning_interfaces.msg import Constraint
@@ -149,6 +156,12 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--evaluate', action='store_true',
                         help='one recorded full-model run of --x0 (default the centre), no '
                              'optimisation')
+    parser.add_argument('--telemetry-rate', type=_number(float, 0.0, False), default=None,
+                        metavar='R',
+                        help="live telemetry for this goal: every simulation worker's "
+                             "parameter telemetry_rate set to R (a run's telemetry paced at "
+                             'its simulated time / R; 1.0: as it happened) and set back '
+                             'when tune ends')
     parser.add_argument('--action', default='/coordinator/optimise', help='action name')
     parser.add_argument('--server-timeout', type=_number(float, 0.0, True),
                         default=30.0, help='seconds to wait for the coordinator')
@@ -408,6 +421,74 @@ def cancel(handle) -> int:
     return 130
 
 
+#: The service every simulation worker offers (nodes/full_vehicle_sim.py), by type.
+EVALUATE_TYPE = 'suspension_tuning_interfaces/srv/EvaluateDesign'
+
+
+def simulation_workers(node: Node) -> list[str]:
+    """The full names of the simulation workers ``node`` sees.
+
+    They are the nodes serving ``<node>/evaluate`` of type EvaluateDesign.
+    """
+    return sorted(name.rsplit('/', 1)[0] for name, types in node.get_service_names_and_types()
+                  if name.endswith('/evaluate') and EVALUATE_TYPE in types)
+
+
+class LiveTelemetry:
+    """``tune --telemetry-rate``: the workers' ``telemetry_rate`` set for one goal.
+
+    Each worker seen on the graph gets the parameter through its parameter services (as
+    ``ros2 param set`` does); :meth:`restore` sets every worker back to the value it
+    had.  A worker that does not answer within ``timeout_s`` is named on stderr and
+    left alone.
+    """
+
+    def __init__(self, node: Node, rate: float, timeout_s: float = 5.0) -> None:
+        self.node, self.rate, self.timeout_s = node, float(rate), timeout_s
+        self.previous: dict[str, float] = {}
+        self.clients: dict[str, AsyncParameterClient] = {}
+
+    def apply(self, discovery_s: float = 2.0) -> list[str]:
+        """Set the rate on every worker seen within ``discovery_s``; returns their names."""
+        deadline = time.monotonic() + discovery_s
+        workers = simulation_workers(self.node)
+        while time.monotonic() < deadline:  # the pool may still be being discovered
+            time.sleep(POLL_S)
+            workers = sorted(set(workers) | set(simulation_workers(self.node)))
+        for name in workers:
+            client = AsyncParameterClient(self.node, name)
+            if not client.wait_for_services(timeout_sec=self.timeout_s):
+                print(f'warning: {name} offers no parameter services: its telemetry stays '
+                      'as it is', file=sys.stderr)
+                continue
+            try:
+                old = wait_future(client.get_parameters(['telemetry_rate']), self.timeout_s)
+                answer = wait_future(client.set_parameters(
+                    [Parameter('telemetry_rate', value=self.rate)]), self.timeout_s)
+            except TimeoutError:
+                print(f'warning: {name} did not answer: its telemetry stays as it is',
+                      file=sys.stderr)
+                continue
+            if not answer.results[0].successful:
+                print(f'warning: {name} refused telemetry_rate {self.rate:g}: '
+                      f'{answer.results[0].reason}', file=sys.stderr)
+                continue
+            self.clients[name] = client
+            self.previous[name] = float(old.values[0].double_value)
+        return sorted(self.clients)
+
+    def restore(self) -> None:
+        """Set each worker's ``telemetry_rate`` back to what it was before :meth:`apply`."""
+        for name, client in self.clients.items():
+            try:
+                wait_future(client.set_parameters(
+                    [Parameter('telemetry_rate', value=self.previous[name])]), self.timeout_s)
+            except (TimeoutError, KeyboardInterrupt):
+                print(f'warning: {name}: telemetry_rate not set back to '
+                      f'{self.previous[name]:g}', file=sys.stderr)
+        self.clients.clear()
+
+
 #: How long ``tune`` looks for the action server before it says it is waiting, s.
 QUIET_WAIT_S = 0.5
 
@@ -476,6 +557,7 @@ def main(argv: list[str] | None = None) -> int:
     spinner = threading.Thread(target=spin, args=(executor, duplicate), daemon=True)
     spinner.start()
     sending, handle = None, None
+    live = None if args.telemetry_rate is None else LiveTelemetry(node, args.telemetry_rate)
     try:
         if not wait_for_server(client, args.action, domain_id, args.server_timeout):
             return 2
@@ -483,6 +565,11 @@ def main(argv: list[str] | None = None) -> int:
         if count > 1:
             print(not_unique(args.action, domain_id, count), file=sys.stderr)
             return 2
+        if live is not None:
+            workers = live.apply()
+            print(f"live telemetry at {live.rate:g} x simulated time from "
+                  f"{', '.join(workers) or 'no simulation worker'}", file=sys.stderr,
+                  flush=True)
         goal = Optimise.Goal(scenario=args.scenario, n_vars=args.n_vars, x0=x0,
                              gradient_source='evaluate' if args.evaluate else args.gradient,
                              max_iterations=args.max_iterations, move_limit=args.move_limit,
@@ -529,6 +616,8 @@ def main(argv: list[str] | None = None) -> int:
                 pass
         return cancel(handle)
     finally:
+        if live is not None:
+            live.restore()
         executor.shutdown(timeout_sec=5.0)
         spinner.join(timeout=5.0)
         client.destroy()

@@ -81,6 +81,28 @@ def test_tune_sends_constraints_from_the_command_line(ros_context, executor):
     assert 'constraint 1: value' in run.stdout, run.stdout + run.stderr
 
 
+def test_tune_telemetry_rate_sets_the_workers_live_for_its_goal_and_back_after(
+        ros_context, executor):
+    from suspension_tuning.nodes.coordinator import CoordinatorNode
+    from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
+
+    worker = FullVehicleSimNode(context=ros_context)
+    seen: list[float] = []  # every telemetry_rate the worker was set to
+    worker.add_post_set_parameters_callback(lambda params: seen.extend(
+        p.value for p in params if p.name == 'telemetry_rate'))
+    executor.add(worker, CoordinatorNode(context=ros_context, parameter_overrides=[
+        Parameter('final_telemetry', value=False)]))
+    tune = Path(sys.prefix) / 'bin' / 'tune'
+    # One handling run (8.9 s of lane change at 4 x: about 2 s of pacing).
+    run = subprocess.run([str(tune), '--scenario', 'handling', '--evaluate',
+                          '--telemetry-rate', '4'],
+                         capture_output=True, text=True, timeout=300, env=os.environ.copy())
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert 'live telemetry at 4 x simulated time from /full_vehicle_sim' in run.stderr
+    assert seen == [4.0, 0.0]  # set for the goal, then back to the default 0 (at once)
+    assert worker.get_parameter('telemetry_rate').value == 0.0
+
+
 def test_tune_rejects_a_malformed_constraint_before_sending_a_goal():
     tune = Path(sys.prefix) / 'bin' / 'tune'
     run = subprocess.run([str(tune), '--constraint', 'handling:f_hand<0.8'],
