@@ -17,6 +17,13 @@ signals.  Prints ``name: value`` lines::
     .venv/bin/python benchmarks/bench_stops.py              # 20 SIGINT, 10 SIGTERM
     .venv/bin/python benchmarks/bench_stops.py --sigint 4 --sigterm 4 --idle-s 10
 
+``--nodes``: the graph as separate node processes (as ``ros2 run`` starts them, each with
+its ``config/*.yaml``), and each node in turn gets the signal, idle (``start``) and with a
+goal running (``goal``); then the others are stopped by SIGINT.  A node is documented to
+exit 0 on both signals; every bag must be complete::
+
+    .venv/bin/python benchmarks/bench_stops.py --nodes
+
 Every process runs with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and the
 ``ROS_DOMAIN_ID`` of the environment (default 140).
 """
@@ -136,6 +143,76 @@ def one_stop(state: str, signum: int, env: dict[str, str], args) -> dict[str, ob
             'stop_s': stop_s, 'note': note, 'output': text}
 
 
+#: The nodes of a graph started one process each, with their parameter files.
+NODES = {'full_vehicle_sim': 'graph.yaml', 'gradient_evaluator': 'graph.yaml',
+         'valve_controller': 'valve_controller.yaml', 'coordinator': 'graph.yaml',
+         'recorder': 'recorder.yaml'}
+
+
+def one_node_stop(target: str, state: str, signum: int, env: dict[str, str],
+                  args) -> dict[str, object]:
+    """Send ``signum`` to ``target`` alone, in a graph of one process per node in ``state``.
+
+    Returns what happened to ``target``; the other nodes then get SIGINT.
+    """
+    config = Path(__file__).resolve().parents[1] / 'config'
+    bags = Path(tempfile.mkdtemp(prefix='stops_'))
+    processes = {}
+    for name, params in NODES.items():
+        command = [str(BIN / name), '--ros-args', '--params-file', str(config / params)]
+        if name == 'recorder':
+            command += ['-p', f'output_dir:={bags}']
+        processes[name] = spawn(command, env)
+    note, tune = '', None
+    try:
+        if not wait_for_action(env, 60):
+            note = 'the graph did not come up'
+        elif state == 'goal':
+            tune, tune_out = spawn([str(BIN / 'tune'), *GOAL], env)
+            if not tune_out.wait_for('iteration', 300):
+                note = 'no iteration printed'
+        process, out = processes[target]
+        sent = time.monotonic()
+        process.send_signal(signum)
+        try:
+            rc = process.wait(args.hang_s)
+            hang = False
+        except subprocess.TimeoutExpired:
+            hang = True
+            process.kill()
+            rc = process.wait()
+        stop_s = time.monotonic() - sent
+    finally:
+        if tune is not None and tune.poll() is None:
+            tune.send_signal(signal.SIGINT)
+            try:
+                tune.wait(30)
+            except subprocess.TimeoutExpired:
+                tune.kill()
+                tune.wait()
+        others_hung = []
+        for other, _ in processes.values():
+            if other.poll() is None:
+                other.send_signal(signal.SIGINT)
+        for name, (other, _) in processes.items():
+            try:
+                other.wait(args.hang_s)
+            except subprocess.TimeoutExpired:
+                others_hung.append(name)
+                other.kill()
+                other.wait()
+    out.wait_for('\0', 5)
+    text = out.text()
+    crash = (not hang and rc != 0) or 'Traceback' in text or 'Segmentation' in text
+    mcaps = sorted(bags.rglob('*.mcap'))
+    incomplete = [str(p) for p in mcaps if not p.read_bytes().endswith(MCAP_MAGIC)]
+    if others_hung:
+        note += f' (after it, {", ".join(others_hung)} did not end on SIGINT)'
+    return {'state': state, 'signal': signal.Signals(signum).name, 'rc': rc, 'hang': hang,
+            'crash': crash, 'bags': len(mcaps), 'incomplete': incomplete,
+            'stop_s': stop_s, 'note': note.strip(), 'output': text, 'node': target}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--sigint', type=int, default=20, help='stops by SIGINT')
@@ -143,19 +220,27 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--idle-s', type=float, default=30.0, help="the 'idle' state's wait, s")
     parser.add_argument('--hang-s', type=float, default=20.0,
                         help='a graph not ended this long after the signal hangs, s')
+    parser.add_argument('--nodes', action='store_true',
+                        help='each node of a one-process-per-node graph in turn, idle and '
+                             'mid-goal, SIGINT and SIGTERM (instead of graph)')
     args = parser.parse_args(argv)
     env = {**os.environ, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
            'ROS_DOMAIN_ID': os.environ.get('ROS_DOMAIN_ID', '140'),
            'PYTHONUNBUFFERED': '1'}
-    plan = ([(STATES[i % 4], signal.SIGINT) for i in range(args.sigint)]
-            + [(STATES[i % 4], signal.SIGTERM) for i in range(args.sigterm)])
+    if args.nodes:
+        plan = [(node, state, signum) for node in NODES for state in ('start', 'goal')
+                for signum in (signal.SIGINT, signal.SIGTERM)]
+    else:
+        plan = ([('graph', STATES[i % 4], signal.SIGINT) for i in range(args.sigint)]
+                + [('graph', STATES[i % 4], signal.SIGTERM) for i in range(args.sigterm)])
     results = []
-    for i, (state, signum) in enumerate(plan):
-        result = one_stop(state, signum, env, args)
+    for i, (target, state, signum) in enumerate(plan):
+        result = (one_stop(state, signum, env, args) if target == 'graph'
+                  else one_node_stop(target, state, signum, env, args))
         results.append(result)
         flag = ('CRASH ' if result['crash'] else '') + ('HANG ' if result['hang'] else '') + (
             'INCOMPLETE ' if result['incomplete'] else '')
-        print(f'# {i + 1}/{len(plan)} {result["signal"]} {state}: rc {result["rc"]}, '
+        print(f'# {i + 1}/{len(plan)} {target} {result["signal"]} {state}: rc {result["rc"]}, '
               f'{result["stop_s"]:.1f} s, {result["bags"]} bag(s) {flag}{result["note"]}',
               flush=True)
         if flag:

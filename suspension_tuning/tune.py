@@ -110,6 +110,29 @@ def _number(kind: type, minimum: float, strict: bool, maximum: float = float('in
     return parse
 
 
+def _design_size(text: str) -> int:
+    """An argparse type: a number of design variables config/design_space.yaml offers.
+
+    Those are the paper's 2 and 4 and the sizes of its presets; a file that does not
+    load is left to the configuration check, which names its line.
+    """
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a whole number') from None
+    try:
+        sizes = load_design_space().sizes
+    except (OSError, ValueError):
+        sizes = ()
+    if sizes and value not in sizes:
+        raise argparse.ArgumentTypeError(
+            f"must be one of {', '.join(map(str, sizes))} (the paper's sizes and the presets "
+            f'of config/design_space.yaml), got {text}')
+    if value < 1:
+        raise argparse.ArgumentTypeError(f'must be at least 1, got {text}')
+    return value
+
+
 def parse_args(argv: list[str]) -> argparse.Namespace:
     """Parse the command-line options of ``tune``.
 
@@ -120,7 +143,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog='tune', description=__doc__.split('\n')[0])
     parser.add_argument('--scenario', default='ride',
                         help="'ride' or 'handling' ('mixed' too with --evaluate)")
-    parser.add_argument('--n-vars', type=_number(int, 1, False, 2**32 - 1), default=None,
+    parser.add_argument('--n-vars', type=_design_size, default=None,
                         help='2 or 4 design variables (the paper\'s), or the size of a preset '
                              'of config/design_space.yaml (8: ride8); default 2, or the size '
                              'whose names --start gives')

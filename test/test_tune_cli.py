@@ -208,7 +208,9 @@ def test_tune_without_a_coordinator_says_it_waits_then_what_to_check(ros_context
 
 
 @pytest.mark.parametrize(('option', 'value', 'reason'), [
-    ('--n-vars', '-2', "invalid choice: -2 (choose from 2, 4)"),
+    # the paper's 2 and 4 (eqs. 5, 7) and the ride8 preset of config/design_space.yaml
+    ('--n-vars', '-2', "must be one of 2, 4, 8 (the paper's sizes and the presets of "
+                       'config/design_space.yaml), got -2'),
     ('--max-iterations', '-1', 'must be at least 0 and at most 4294967295, got -1'),
     # the goal's max_iterations is a uint32
     ('--max-iterations', str(2**32), f'must be at least 0 and at most {2**32 - 1}, '

@@ -665,7 +665,7 @@ class CoordinatorNode(Node):
             self.get_logger().error(f'goal refused: {error}')
             goal_handle.abort()
             message = Optimise.Result(success=False, message=f'configuration: {error}')
-            self.result_pub.publish(message)
+            self.result_pub.publish(result_topic_message(message))
             return message
         if goal_handle.request.gradient_source == EVALUATE:
             return self._evaluate_run(goal_handle, t0)
@@ -776,7 +776,7 @@ class CoordinatorNode(Node):
         """  # noqa: D205
         from suspension_tuning.answer_check import check_options
         from suspension_tuning.model_identity import builtin_fingerprint
-        from suspension_tuning.studies.common import integrator_name
+        from suspension_tuning.vehicle.params import integrator_name
 
         none = {'check_model': None, 'check_gtol': 5e-3, 'check_continuations': 0}
         try:

@@ -189,7 +189,7 @@ class FullVehicleSimNode(Node):
             # Read once at start-up (the model, its fingerprint, the liveliness QoS).
             read_only(self, ['model', 'fmu_path', 'fmu_mapping', 'plausibility_check',
                              'fmu_isolation', 'integrator', 'fmu_timeout_s', 'fmu_processes',
-                             'liveliness_lease_s'])
+                             'plausibility_timeout_s', 'liveliness_lease_s'])
             param = self.get_parameter
             self.fmu = worker_model(
                 *(str(param(name).value) for name in ('model', 'fmu_path', 'fmu_mapping')),

@@ -66,6 +66,7 @@ from suspension_tuning.vehicle.design import (
     load_design_space,
     validate_design,
 )
+from suspension_tuning.vehicle.params import integrator_name
 from suspension_tuning.vehicle.scenarios import run_scenario
 
 Array = NDArray[np.float64]
@@ -510,15 +511,6 @@ def model_details(integrator: str | None) -> dict[str, str]:
     """
     name = integrator_name(integrator)
     return {'integrator': name, 'model_fingerprint': builtin_fingerprint(name)}
-
-
-def integrator_name(integrator: str | None) -> str:
-    """The integrator a run uses: the given one or config/vehicle.yaml's default."""
-    if integrator is not None:
-        return integrator
-    from suspension_tuning.vehicle.params import load_vehicle_params
-
-    return load_vehicle_params().integrator.method
 
 
 def run_slsqp(

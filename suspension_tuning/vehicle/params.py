@@ -421,3 +421,10 @@ def load_scenarios_config(path: str | Path | None = None) -> dict[str, Any]:
     """Load config/scenarios.yaml as a plain mapping (units in the key names)."""
     path = Path(path) if path is not None else CONFIG_DIR / 'scenarios.yaml'
     return read_yaml(path)
+
+
+def integrator_name(integrator: str | None) -> str:
+    """The integrator a run uses: the given one or config/vehicle.yaml's default."""
+    if integrator is not None:
+        return integrator
+    return load_vehicle_params().integrator.method
