@@ -207,9 +207,10 @@ def one_node_stop(target: str, state: str, signum: int, env: dict[str, str],
     mcaps = sorted(bags.rglob('*.mcap'))
     incomplete = [str(p) for p in mcaps if not p.read_bytes().endswith(MCAP_MAGIC)]
     if others_hung:
-        note += f' (after it, {", ".join(others_hung)} did not end on SIGINT)'
-    return {'state': state, 'signal': signal.Signals(signum).name, 'rc': rc, 'hang': hang,
-            'crash': crash, 'bags': len(mcaps), 'incomplete': incomplete,
+        note += f' (after it, {", ".join(others_hung)} did not end on SIGINT: killed)'
+    return {'others_hung': others_hung, 'state': state,
+            'signal': signal.Signals(signum).name, 'rc': rc, 'hang': hang, 'crash': crash,
+            'bags': len(mcaps), 'incomplete': incomplete,
             'stop_s': stop_s, 'note': note.strip(), 'output': text, 'node': target}
 
 
@@ -255,8 +256,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f'stops_{key}_incomplete_bags: {sum(len(r["incomplete"]) for r in mine)}')
         if mine:
             print(f'stops_{key}_slowest_s: {max(r["stop_s"] for r in mine):.1f}')
-    print(f'stops_not_reached_state: {sum(bool(r["note"]) for r in results)}')
-    bad = sum(r['crash'] or r['hang'] or bool(r['incomplete']) for r in results)
+    if args.nodes:  # the other nodes, stopped by SIGINT after each target
+        print(f'stops_other_nodes_hangs: {sum(len(r["others_hung"]) for r in results)}')
+    print(f'stops_not_reached_state: '
+          f'{sum(bool(r["note"]) and not r.get("others_hung") for r in results)}')
+    bad = sum(r['crash'] or r['hang'] or bool(r['incomplete']) or bool(r.get('others_hung'))
+              for r in results)
     return 1 if bad else 0
 
 
