@@ -98,7 +98,8 @@ def metric_table(metrics: dict[str, np.ndarray], batch: int) -> tuple[list[str],
 
 
 def evaluate(scenario: str, designs: Array, controllers: list | None = None,
-             integrator: str | None = None, road: str = '', **kwargs: Any) -> DesignEvaluation:
+             integrator: str | None = None, road: str = '', condition: str = '',
+             **kwargs: Any) -> DesignEvaluation:
     """Run the full model on a batch of designs (m, n_vars).
 
     Parameters
@@ -117,6 +118,10 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
         road name, a road file or an entry as YAML
         (:func:`~suspension_tuning.vehicle.road.resolve_road`); '' = the configured one.
         The handling scenario runs on its smooth road whatever this says.
+    condition : str
+        An operating condition as text (:meth:`suspension_tuning.conditions.Condition.
+        as_text`): the ride at its speed, with its payload, on its road (before
+        ``road``); '' = none.  Ride only.
     **kwargs
         Passed to :func:`suspension_tuning.vehicle.scenarios.run_scenario` (or
         :func:`~suspension_tuning.vehicle.mixed.run_mixed`): ``params``, ``space`` (the
@@ -125,6 +130,18 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
     if integrator is not None:
         params = kwargs.get('params') or load_vehicle_params()
         kwargs['params'] = with_integrator(params, integrator)
+    if condition:
+        from suspension_tuning.conditions import (
+            Condition,
+            condition_params,
+            condition_scenarios,
+        )
+
+        if scenario != 'ride':
+            raise ValueError(f'operating conditions are for the ride scenario, not {scenario!r}')
+        parsed = Condition.from_text(condition)
+        kwargs['params'] = condition_params(parsed, kwargs.get('params'))
+        kwargs['config'] = condition_scenarios(parsed, kwargs.get('config'))
     if scenario == 'mixed':
         result = run_mixed(designs, controllers, road=road or None, **kwargs)
     else:
