@@ -62,6 +62,7 @@ def test_a_three_condition_goal_reports_every_condition_in_the_result_and_the_ba
     from suspension_tuning.nodes._conditions import CONDITION_METRICS
     from suspension_tuning.nodes.recorder import RecorderNode
     from suspension_tuning.physical_metrics import physical_metrics
+    from suspension_tuning.tune import format_result
     from suspension_tuning.vehicle.design import load_design_space
 
     nodes, client_node = graph
@@ -92,6 +93,9 @@ def test_a_three_condition_goal_reports_every_condition_in_the_result_and_the_ba
     assert result.worst_condition == NAMES[int(np.argmax(result.condition_f))]
     assert result.f == pytest.approx(max(result.condition_f))  # the worst-case objective
     assert result.baseline_f == pytest.approx(max(result.condition_baseline_f))
+    report = format_result(result)  # what tune prints: every condition, the worst named
+    assert f'worst: {result.worst_condition}' in report
+    assert all(f'condition {name}: f ' in report for name in NAMES)
     # The bag: the condition set in the run configuration, the per-condition result.
     recorder = next(n for n in nodes if isinstance(n, RecorderNode))
     deadline = time.monotonic() + 30.0
