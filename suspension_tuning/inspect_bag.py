@@ -161,6 +161,7 @@ def optimum(contents: BagContents) -> dict[str, Any] | None:
             'baseline': dict(zip(names, [float(v) for v in
                                          getattr(msg, 'baseline_metrics', [])]))},
     }
+    out['conditions'] = condition_table(msg)
     records = history or iterations(contents)
     if not out['x']:  # the run failed before it had a design to report
         out.update(feasible=False, best_iteration=None, max_violation=None)
@@ -171,6 +172,35 @@ def optimum(contents: BagContents) -> dict[str, Any] | None:
     out['last_iterate'] = None if last is None else {
         k: last[k] for k in ('iteration', 'x', 'f', 'max_violation')}
     return out
+
+
+def condition_table(msg: Any) -> dict[str, Any] | None:
+    """Per condition of a result over a condition set (None without a set).
+
+    ``names``, ``worst`` (the condition with the largest f at the reported design),
+    ``rounds`` (batches of full runs) and ``per_condition``: name -> ``f``,
+    ``baseline_f`` (NaN when not recorded) and ``physical_metrics`` (``reported`` and
+    ``baseline``, metric name -> value).
+    """
+    names = [str(n) for n in getattr(msg, 'condition_names', [])]
+    if not names:
+        return None
+    metric_names = [str(n) for n in msg.condition_metric_names]
+    k = len(metric_names)
+
+    def row(values: Any, c: int) -> dict[str, float]:
+        values = [float(v) for v in values]
+        return dict(zip(metric_names, values[c * k:(c + 1) * k])) if values else {}
+
+    def at(values: Any, c: int) -> float:
+        return float(values[c]) if len(values) > c else math.nan
+
+    return {'names': names, 'worst': str(msg.worst_condition), 'rounds': int(msg.n_rounds),
+            'per_condition': {name: {
+                'f': at(msg.condition_f, c), 'baseline_f': at(msg.condition_baseline_f, c),
+                'physical_metrics': {'reported': row(msg.condition_metrics, c),
+                                     'baseline': row(msg.condition_baseline_metrics, c)}}
+                for c, name in enumerate(names)}}
 
 
 def _best_of_history(records: list[dict[str, Any]], gtol: float,
@@ -523,6 +553,16 @@ def _format_optimum(best: dict[str, Any]) -> list[str]:
     if base:
         lines.append(f'baseline design: f = {base["f"]!r}, x = {base["x"]}')
         lines += [f'  {name} = {value:g}' for name, value in base['physical'].items()]
+    conditions = best.get('conditions')
+    if conditions:
+        lines.append(f'conditions: {len(conditions["names"])}, worst at the reported design: '
+                     f'{conditions["worst"]} ({conditions["rounds"]} rounds of full runs)')
+        for name, entry in conditions['per_condition'].items():
+            lines.append(f'  condition {name}: f baseline {entry["baseline_f"]:.6g}, '
+                         f'reported {entry["f"]:.6g}')
+            lines += ['    ' + line for line in metric_lines(
+                entry['physical_metrics']['baseline'], entry['physical_metrics']['reported'],
+                'optimum' if best['feasible'] else 'reported')]
     metrics = best.get('physical_metrics') or {}
     if metrics.get('reported') or metrics.get('baseline'):
         lines.append('physical metrics:')

@@ -59,6 +59,7 @@ def test_a_three_condition_goal_reports_every_condition_in_the_result_and_the_ba
     from suspension_tuning import evaluation
     from suspension_tuning.bag.reader import decode, read_messages
     from suspension_tuning.conditions import ConditionSet, load_conditions
+    from suspension_tuning.inspect_bag import _format, summary
     from suspension_tuning.nodes._conditions import CONDITION_METRICS
     from suspension_tuning.nodes.recorder import RecorderNode
     from suspension_tuning.physical_metrics import physical_metrics
@@ -108,6 +109,13 @@ def test_a_three_condition_goal_reports_every_condition_in_the_result_and_the_ba
     recorded = decode(contents, contents.on('/optimisation/result')[0])
     assert list(recorded.condition_metrics) == list(result.condition_metrics)
     assert recorded.worst_condition == result.worst_condition
+    # inspect_bag reads them back per condition
+    bag = recorder.session.closed_bags[0]
+    table = summary(bag)['optimum']['conditions']
+    assert table['worst'] == result.worst_condition
+    assert table['per_condition'][NAMES[1]]['physical_metrics']['reported'] == dict(
+        zip(CONDITION_METRICS, result.condition_metrics[k:2 * k]))
+    assert f'condition {NAMES[2]}: f baseline' in _format(summary(bag))
 
 
 def test_a_bad_condition_set_is_a_bad_goal(graph):
