@@ -670,7 +670,7 @@ class CoordinatorNode(Node):
             self.get_logger().error(f'goal refused: {error}')
             goal_handle.abort()
             message = Optimise.Result(success=False, message=f'configuration: {error}')
-            self.result_pub.publish(message)
+            self.result_pub.publish(result_topic_message(message))
             return message
         if goal_handle.request.gradient_source == EVALUATE:
             return self._evaluate_run(goal_handle, t0)
