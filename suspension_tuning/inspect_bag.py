@@ -372,6 +372,10 @@ def write_plots(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]) -
     if metrics.get('reported') or metrics.get('baseline'):
         written.append(_metrics_plot(out, metrics, 'optimum' if best and best['feasible']
                                      else 'reported design'))
+    if (result or {}).get('conditions'):
+        written.append(_conditions_plot(out, result['conditions'],
+                                        'optimum' if best and best['feasible']
+                                        else 'reported design'))
     telemetry = sorted(t for t in contents.topics() if '/telemetry/' in t)
     if telemetry:
         fig, axes = plt.subplots(
@@ -515,6 +519,45 @@ def _metrics_plot(out: Path, metrics: dict[str, dict[str, float]], reported_labe
     fig.savefig(out / 'metrics.png', dpi=100)
     plt.close(fig)
     return out / 'metrics.png'
+
+
+def _conditions_plot(out: Path, conditions: dict[str, Any], reported_label: str) -> Path:
+    """conditions.png: per condition, f and each physical metric, baseline and reported."""
+    import matplotlib.pyplot as plt
+
+    from suspension_tuning.physical_metrics import LABELS
+
+    names = conditions['names']
+    entries = [conditions['per_condition'][n] for n in names]
+    metric_names = list(dict.fromkeys(
+        m for e in entries for side in ('reported', 'baseline')
+        for m in e['physical_metrics'][side]))
+    panels = [('f', ('objective f', '-'))] + [(m, LABELS.get(m, (m, ''))) for m in metric_names]
+    columns = min(3, len(panels))
+    rows = -(-len(panels) // columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(3.6 * columns, 2.8 * rows),
+                             squeeze=False)
+    x = np.arange(len(names))
+    for ax, (key, (label, unit)) in zip(axes.ravel(), panels):
+        if key == 'f':
+            base = [e['baseline_f'] for e in entries]
+            rep = [e['f'] for e in entries]
+        else:
+            base = [e['physical_metrics']['baseline'].get(key, math.nan) for e in entries]
+            rep = [e['physical_metrics']['reported'].get(key, math.nan) for e in entries]
+        ax.bar(x - 0.2, base, 0.4, color='tab:gray', label='baseline')
+        ax.bar(x + 0.2, rep, 0.4, color='tab:green', label=reported_label)
+        ax.set_xticks(x, names, rotation=45, ha='right', fontsize=7)
+        ax.set_title(label, fontsize=9)
+        ax.set_ylabel(unit)
+    axes.ravel()[0].legend(fontsize=7)
+    for ax in axes.ravel()[len(panels):]:
+        ax.set_visible(False)
+    fig.suptitle(f"per condition (worst at the reported design: {conditions['worst']})")
+    fig.tight_layout()
+    fig.savefig(out / 'conditions.png', dpi=100)
+    plt.close(fig)
+    return out / 'conditions.png'
 
 
 # ------------------------------------------------------------------------ CLI

@@ -50,7 +50,8 @@ def _run(client_node, goal):
     return wait_future(handle.get_result_async(), 300.0).result
 
 
-def test_a_three_condition_goal_reports_every_condition_in_the_result_and_the_bag(graph):
+def test_a_three_condition_goal_reports_every_condition_in_the_result_and_the_bag(graph,
+                                                                                  tmp_path):
     import time
 
     import yaml
@@ -59,7 +60,7 @@ def test_a_three_condition_goal_reports_every_condition_in_the_result_and_the_ba
     from suspension_tuning import evaluation
     from suspension_tuning.bag.reader import decode, read_messages
     from suspension_tuning.conditions import ConditionSet, load_conditions
-    from suspension_tuning.inspect_bag import _format, summary
+    from suspension_tuning.inspect_bag import _format, summary, write_plots
     from suspension_tuning.nodes._conditions import CONDITION_METRICS
     from suspension_tuning.nodes.recorder import RecorderNode
     from suspension_tuning.physical_metrics import physical_metrics
@@ -116,6 +117,8 @@ def test_a_three_condition_goal_reports_every_condition_in_the_result_and_the_ba
     assert table['per_condition'][NAMES[1]]['physical_metrics']['reported'] == dict(
         zip(CONDITION_METRICS, result.condition_metrics[k:2 * k]))
     assert f'condition {NAMES[2]}: f baseline' in _format(summary(bag))
+    plots = write_plots(bag, tmp_path / 'plots')
+    assert tmp_path / 'plots' / 'conditions.png' in plots
 
 
 def test_a_bad_condition_set_is_a_bad_goal(graph):
