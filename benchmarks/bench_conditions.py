@@ -30,7 +30,8 @@ Figures:
   thread each, the condition-runs shared as the pool shares a batch: ``--speedup-designs``
   designs, default 6, each in every condition; the least of 3 timings).
 
-The reference is in benchmarks/references.json (case ``ride_4var_conditions_worst``),
+The reference is in benchmarks/references.json (``condition_cases``:
+``ride_4var_conditions_worst``),
 written by ``.venv/bin/python benchmarks/bench_conditions.py --write-reference``: the
 best feasible worst-case design (max g <= 1e-3 in every condition) among a 5^4 grid of
 the normalised box, Dynamic-Q with full-model gradients from the 'baseline' and
@@ -73,11 +74,8 @@ def _options() -> dict:
 
 
 def _run(start: np.ndarray, conditions, gradients, source: str, maxiter: int | None = None):
-    from suspension_tuning.tuning import (
-        TuningRequest,
-        in_process_condition_model,
-        optimise_conditions,
-    )
+    from suspension_tuning.evaluation import in_process_condition_model
+    from suspension_tuning.tuning import TuningRequest, optimise_conditions
 
     options = _options()
     if maxiter:
@@ -89,7 +87,8 @@ def _run(start: np.ndarray, conditions, gradients, source: str, maxiter: int | N
 
 
 def _worst(x: np.ndarray, conditions) -> tuple[float, float]:
-    from suspension_tuning.tuning import RunCounter, _ConditionTerms, in_process_condition_model
+    from suspension_tuning.evaluation import in_process_condition_model
+    from suspension_tuning.tuning import RunCounter, _ConditionTerms
 
     f, g, _ = _ConditionTerms(in_process_condition_model(), conditions.conditions,
                               RunCounter()).at(np.asarray(x, float))
@@ -100,8 +99,9 @@ def write_reference(conditions, gradients) -> dict:
     """Search the reference once (see the module docstring) and store it."""
     from scipy.optimize import minimize
 
+    from suspension_tuning.evaluation import in_process_condition_model
     from suspension_tuning.studies.method_benchmark import benchmark_starts
-    from suspension_tuning.tuning import RunCounter, _ConditionTerms, in_process_condition_model
+    from suspension_tuning.tuning import RunCounter, _ConditionTerms
 
     candidates = []
     for name, x0 in benchmark_starts(N_VARS):
@@ -143,7 +143,7 @@ def write_reference(conditions, gradients) -> dict:
              'found_by': best_how, 'command': COMMAND, 'feasibility_gtol': REFERENCE_GTOL,
              'condition_count': n_c}
     data = json.loads(REFERENCES.read_text())
-    data['cases'][CASE] = entry
+    data.setdefault('condition_cases', {})[CASE] = entry
     REFERENCES.write_text(json.dumps(data, indent=1) + '\n')
     return entry
 
@@ -192,8 +192,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     os.environ.setdefault('NUMBA_NUM_THREADS', '1')
     from suspension_tuning.conditions import load_conditions
+    from suspension_tuning.evaluation import in_process_condition_gradients
     from suspension_tuning.studies.method_benchmark import benchmark_starts
-    from suspension_tuning.tuning import in_process_condition_gradients
 
     conditions = load_conditions()
     if args.speedup_only:
@@ -212,7 +212,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.write_reference:
         entry = write_reference(conditions, gradients)
         print(f'conditions_reference_f: {entry["f"]:.6f} ({entry["found_by"]})')
-    reference = json.loads(REFERENCES.read_text())['cases'].get(CASE)
+    reference = json.loads(REFERENCES.read_text()).get('condition_cases', {}).get(CASE)
     if reference is None:
         print(f'no reference for {CASE}: run {COMMAND}', file=sys.stderr)
         return 1

@@ -137,15 +137,15 @@ def condition_fields(message: Any, result: Any, conditions: Any,
 
 
 def run_condition_goal(node: Any, goal_handle: Any, request: TuningRequest,
-                       fingerprint: str, t0: float) -> Optimise.Result:
-    """Optimise ``request`` over its condition set on the workers (the goal's execution)."""
-    from suspension_tuning.nodes.coordinator import (
-        action_result,
-        config_first,
-        record_to_msg,
-        result_topic_message,
-    )
+                       fingerprint: str, t0: float, results: Any) -> Optimise.Result:
+    """Optimise ``request`` over its condition set on the workers (the goal's execution).
 
+    ``results``: the coordinator's result builders (``action_result``, ``config_first``,
+    ``record_to_msg``, ``result_topic_message``), so that a condition goal reports as
+    any goal does.
+    """
+    action_result, config_first = results.action_result, results.config_first
+    record_to_msg, result_topic_message = results.record_to_msg, results.result_topic_message
     conditions = request.condition_set
     counter = RunCounter()
     history_msgs: list[IterationRecord] = []

@@ -35,6 +35,7 @@ import collections
 import dataclasses
 import math
 import subprocess
+import sys
 import threading
 import time
 from typing import Any
@@ -696,7 +697,8 @@ class CoordinatorNode(Node):
             self.result_pub.publish(result_topic_message(message))
             return message
         if request.condition_set is not None:
-            return run_condition_goal(self, goal_handle, request, fingerprint, t0)
+            return run_condition_goal(self, goal_handle, request, fingerprint, t0,
+                                      sys.modules[__name__])
         self.get_logger().info(f'optimising {request.scenario} with {request.n_vars} '
                                f'variables, {request.gradient_source} gradients, model '
                                f'{fingerprint}')

@@ -204,10 +204,18 @@ def calibrate(
     x, n_samples, seed = calibration_designs(n_vars, n_samples, seed)
     if run_full is None:
         if condition:
-            from suspension_tuning.evaluation import evaluate
+            from suspension_tuning.conditions import (
+                Condition,
+                condition_params,
+                condition_scenarios,
+            )
+            from suspension_tuning.vehicle.scenarios import run_scenario
+
+            parsed = Condition.from_text(condition)
 
             def run_full(name: str, designs: Array) -> Any:
-                return evaluate(name, designs, condition=condition, space=space).result
+                return run_scenario(name, designs, condition_params(parsed),
+                                    config=condition_scenarios(parsed), space=space)
         else:
             from suspension_tuning.vehicle.scenarios import run_scenario as run_full
     res = run_full(scenario, x)

@@ -43,13 +43,9 @@ SINGLE_POINT = 'unladen_50'
 
 def _optimise(conditions: Any, gradients: dict[str, Any], form: str,
               starts: list[tuple[str, np.ndarray]]) -> dict[str, Any]:
+    from suspension_tuning.evaluation import in_process_condition_model
     from suspension_tuning.studies.common import vehicle_options
-    from suspension_tuning.tuning import (
-        TuningRequest,
-        in_process_condition_model,
-        optimise_conditions,
-        with_noise_levels,
-    )
+    from suspension_tuning.tuning import TuningRequest, optimise_conditions, with_noise_levels
 
     options = with_noise_levels(vehicle_options(), 'ride', 'fixed_step')
     best = None
@@ -78,13 +74,12 @@ def _table_row(values: dict[str, float]) -> dict[str, float]:
 def run_study(conditions: Any, switch_by: str = 'load', log=print) -> dict[str, Any]:
     """Run the study (see the module docstring); the designs and the per-condition table."""
     from suspension_tuning.conditions import ConditionSet
-    from suspension_tuning.studies.common import start_point
-    from suspension_tuning.tuning import (
-        RunCounter,
-        _ConditionTerms,
+    from suspension_tuning.evaluation import (
         in_process_condition_gradients,
         in_process_condition_model,
     )
+    from suspension_tuning.studies.common import start_point
+    from suspension_tuning.tuning import RunCounter, _ConditionTerms
     from suspension_tuning.vehicle.design import load_design_space
 
     t0 = time.perf_counter()
