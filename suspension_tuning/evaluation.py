@@ -98,7 +98,8 @@ def metric_table(metrics: dict[str, np.ndarray], batch: int) -> tuple[list[str],
 
 
 def evaluate(scenario: str, designs: Array, controllers: list | None = None,
-             integrator: str | None = None, road: str = '', **kwargs: Any) -> DesignEvaluation:
+             integrator: str | None = None, road: str = '', condition: str = '',
+             **kwargs: Any) -> DesignEvaluation:
     """Run the full model on a batch of designs (m, n_vars).
 
     Parameters
@@ -117,6 +118,10 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
         road name, a road file or an entry as YAML
         (:func:`~suspension_tuning.vehicle.road.resolve_road`); '' = the configured one.
         The handling scenario runs on its smooth road whatever this says.
+    condition : str
+        An operating condition as text (:meth:`suspension_tuning.conditions.Condition.
+        as_text`): the ride at its speed, with its payload, on its road (before
+        ``road``); '' = none.  Ride only.
     **kwargs
         Passed to :func:`suspension_tuning.vehicle.scenarios.run_scenario` (or
         :func:`~suspension_tuning.vehicle.mixed.run_mixed`): ``params``, ``space`` (the
@@ -125,6 +130,18 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
     if integrator is not None:
         params = kwargs.get('params') or load_vehicle_params()
         kwargs['params'] = with_integrator(params, integrator)
+    if condition:
+        from suspension_tuning.conditions import (
+            Condition,
+            condition_params,
+            condition_scenarios,
+        )
+
+        if scenario != 'ride':
+            raise ValueError(f'operating conditions are for the ride scenario, not {scenario!r}')
+        parsed = Condition.from_text(condition)
+        kwargs['params'] = condition_params(parsed, kwargs.get('params'))
+        kwargs['config'] = condition_scenarios(parsed, kwargs.get('config'))
     if scenario == 'mixed':
         result = run_mixed(designs, controllers, road=road or None, **kwargs)
     else:
@@ -160,3 +177,73 @@ def in_process_model(scenario: str, integrator: str | None = None,
                               metric_names=result.metric_names, metrics=result.metrics)
 
     return run
+
+
+def in_process_condition_model(integrator: str | None = None) -> Callable[[Array, Any], list]:
+    """The built-in full model over conditions, in-process (one design-batch per condition)."""
+    from suspension_tuning.tuning import FullEvaluation
+
+    def run(designs: Array, conditions: Sequence[Any]) -> list[FullEvaluation]:
+        out = []
+        for condition in conditions:
+            result = evaluate('ride', np.atleast_2d(np.asarray(designs, float)),
+                              integrator=integrator or None, condition=condition.as_text())
+            out.append(FullEvaluation(f=result.f, g=result.g, metric_names=result.metric_names,
+                                      metrics=result.metrics))
+        return out
+
+    return run
+
+
+def in_process_condition_gradients(conditions: Any, n_vars: int,
+                                   cache_dir: str | None = None,
+                                   n_samples: int | None = None) -> dict[str, Any]:
+    """The scaled simplified gradient of every condition, each calibrated in it.
+
+    One eq. 25 calibration per condition (N full runs in that condition, config/
+    simplified_models.yaml ``scaling``), kept in ``cache_dir`` (default
+    ``~/.cache/suspension_tuning/calibration``) under a key that holds the condition.
+
+    Returns
+    -------
+    dict
+        Condition name -> :class:`~suspension_tuning.optim.simplified_gradient.
+        SimplifiedGradient`, whose attribute ``calibration_runs`` holds the full runs its
+        calibration spent now (0 when loaded from the cache).
+    """
+    import hashlib
+    import json
+    from pathlib import Path
+
+    from suspension_tuning.optim.scaling import Scaling, scaling_key
+    from suspension_tuning.optim.simplified_gradient import (
+        SimplifiedGradient,
+        calibrate,
+        calibration_settings,
+    )
+
+    directory = Path(cache_dir) if cache_dir else (
+        Path.home() / '.cache' / 'suspension_tuning' / 'calibration')
+    n_samples, seed = calibration_settings(n_samples)
+    out: dict[str, Any] = {}
+    for condition in getattr(conditions, 'conditions', conditions):
+        text = condition.as_text()
+        key = scaling_key('ride', n_vars, n_samples, seed)
+        key['condition'] = text
+        digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
+        path = directory / f'condition_ride_{n_vars}var_{digest}.json'
+        scaling, runs = None, 0
+        if path.exists():
+            try:
+                scaling = Scaling.load(path, expected_key=key)
+            except ValueError:
+                scaling = None
+        if scaling is None:
+            scaling = calibrate('ride', n_vars, n_samples, seed, condition=text)
+            runs = n_samples
+            path.parent.mkdir(parents=True, exist_ok=True)
+            scaling.save(path)
+        gradient = SimplifiedGradient('ride', n_vars, scaling, condition=text)
+        gradient.calibration_runs = runs
+        out[condition.name] = gradient
+    return out

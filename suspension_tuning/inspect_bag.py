@@ -161,6 +161,7 @@ def optimum(contents: BagContents) -> dict[str, Any] | None:
             'baseline': dict(zip(names, [float(v) for v in
                                          getattr(msg, 'baseline_metrics', [])]))},
     }
+    out['conditions'] = condition_table(msg)
     records = history or iterations(contents)
     if not out['x']:  # the run failed before it had a design to report
         out.update(feasible=False, best_iteration=None, max_violation=None)
@@ -171,6 +172,35 @@ def optimum(contents: BagContents) -> dict[str, Any] | None:
     out['last_iterate'] = None if last is None else {
         k: last[k] for k in ('iteration', 'x', 'f', 'max_violation')}
     return out
+
+
+def condition_table(msg: Any) -> dict[str, Any] | None:
+    """Per condition of a result over a condition set (None without a set).
+
+    ``names``, ``worst`` (the condition with the largest f at the reported design),
+    ``rounds`` (batches of full runs) and ``per_condition``: name -> ``f``,
+    ``baseline_f`` (NaN when not recorded) and ``physical_metrics`` (``reported`` and
+    ``baseline``, metric name -> value).
+    """
+    names = [str(n) for n in getattr(msg, 'condition_names', [])]
+    if not names:
+        return None
+    metric_names = [str(n) for n in msg.condition_metric_names]
+    k = len(metric_names)
+
+    def row(values: Any, c: int) -> dict[str, float]:
+        values = [float(v) for v in values]
+        return dict(zip(metric_names, values[c * k:(c + 1) * k])) if values else {}
+
+    def at(values: Any, c: int) -> float:
+        return float(values[c]) if len(values) > c else math.nan
+
+    return {'names': names, 'worst': str(msg.worst_condition), 'rounds': int(msg.n_rounds),
+            'per_condition': {name: {
+                'f': at(msg.condition_f, c), 'baseline_f': at(msg.condition_baseline_f, c),
+                'physical_metrics': {'reported': row(msg.condition_metrics, c),
+                                     'baseline': row(msg.condition_baseline_metrics, c)}}
+                for c, name in enumerate(names)}}
 
 
 def _best_of_history(records: list[dict[str, Any]], gtol: float,
@@ -342,6 +372,10 @@ def write_plots(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]) -
     if metrics.get('reported') or metrics.get('baseline'):
         written.append(_metrics_plot(out, metrics, 'optimum' if best and best['feasible']
                                      else 'reported design'))
+    if (result or {}).get('conditions'):
+        written.append(_conditions_plot(out, result['conditions'],
+                                        'optimum' if best and best['feasible']
+                                        else 'reported design'))
     telemetry = sorted(t for t in contents.topics() if '/telemetry/' in t)
     if telemetry:
         fig, axes = plt.subplots(
@@ -487,6 +521,45 @@ def _metrics_plot(out: Path, metrics: dict[str, dict[str, float]], reported_labe
     return out / 'metrics.png'
 
 
+def _conditions_plot(out: Path, conditions: dict[str, Any], reported_label: str) -> Path:
+    """conditions.png: per condition, f and each physical metric, baseline and reported."""
+    import matplotlib.pyplot as plt
+
+    from suspension_tuning.physical_metrics import LABELS
+
+    names = conditions['names']
+    entries = [conditions['per_condition'][n] for n in names]
+    metric_names = list(dict.fromkeys(
+        m for e in entries for side in ('reported', 'baseline')
+        for m in e['physical_metrics'][side]))
+    panels = [('f', ('objective f', '-'))] + [(m, LABELS.get(m, (m, ''))) for m in metric_names]
+    columns = min(3, len(panels))
+    rows = -(-len(panels) // columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(3.6 * columns, 2.8 * rows),
+                             squeeze=False)
+    x = np.arange(len(names))
+    for ax, (key, (label, unit)) in zip(axes.ravel(), panels):
+        if key == 'f':
+            base = [e['baseline_f'] for e in entries]
+            rep = [e['f'] for e in entries]
+        else:
+            base = [e['physical_metrics']['baseline'].get(key, math.nan) for e in entries]
+            rep = [e['physical_metrics']['reported'].get(key, math.nan) for e in entries]
+        ax.bar(x - 0.2, base, 0.4, color='tab:gray', label='baseline')
+        ax.bar(x + 0.2, rep, 0.4, color='tab:green', label=reported_label)
+        ax.set_xticks(x, names, rotation=45, ha='right', fontsize=7)
+        ax.set_title(label, fontsize=9)
+        ax.set_ylabel(unit)
+    axes.ravel()[0].legend(fontsize=7)
+    for ax in axes.ravel()[len(panels):]:
+        ax.set_visible(False)
+    fig.suptitle(f"per condition (worst at the reported design: {conditions['worst']})")
+    fig.tight_layout()
+    fig.savefig(out / 'conditions.png', dpi=100)
+    plt.close(fig)
+    return out / 'conditions.png'
+
+
 # ------------------------------------------------------------------------ CLI
 def _format_optimum(best: dict[str, Any]) -> list[str]:
     """Text lines of the reported design: the best feasible one, or plainly none."""
@@ -523,6 +596,16 @@ def _format_optimum(best: dict[str, Any]) -> list[str]:
     if base:
         lines.append(f'baseline design: f = {base["f"]!r}, x = {base["x"]}')
         lines += [f'  {name} = {value:g}' for name, value in base['physical'].items()]
+    conditions = best.get('conditions')
+    if conditions:
+        lines.append(f'conditions: {len(conditions["names"])}, worst at the reported design: '
+                     f'{conditions["worst"]} ({conditions["rounds"]} rounds of full runs)')
+        for name, entry in conditions['per_condition'].items():
+            lines.append(f'  condition {name}: f baseline {entry["baseline_f"]:.6g}, '
+                         f'reported {entry["f"]:.6g}')
+            lines += ['    ' + line for line in metric_lines(
+                entry['physical_metrics']['baseline'], entry['physical_metrics']['reported'],
+                'optimum' if best['feasible'] else 'reported')]
     metrics = best.get('physical_metrics') or {}
     if metrics.get('reported') or metrics.get('baseline'):
         lines.append('physical metrics:')

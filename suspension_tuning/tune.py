@@ -16,6 +16,13 @@ repeat it (a warning in the workers' log names the period that introduces)::
     tune --scenario ride --road belgian_block_measured
     tune --scenario ride --road ~/tracks/gerotek_belgian.crg
 
+The ride over a set of operating conditions (speeds, payloads, roads; docs/conditions.md),
+the worst case (default) or the weighted mean; the file is checked before the goal goes
+out (one line naming the file, the condition and the key, exit status 2)::
+
+    tune --scenario ride --n-vars 4 --conditions config/conditions.yaml
+    tune --scenario ride --conditions my_set.yaml --condition-form mean
+
 One recorded full-model run of a design instead of an optimisation (any scenario; in
 'mixed' the valves switch closed-loop), e.g. for a bag to look at in Foxglove::
 
@@ -176,6 +183,12 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                              "(default: config/scenarios.yaml's)")
     parser.add_argument('--repeat-road', action='store_true',
                         help='repeat a road file shorter than the run (a periodic excitation)')
+    parser.add_argument('--conditions', default='', metavar='FILE',
+                        help='ride over the operating conditions of FILE (e.g. '
+                        'config/conditions.yaml): speeds, payloads, roads (docs/conditions.md)')
+    parser.add_argument('--condition-form', default='worst', choices=('worst', 'mean'),
+                        help='over the conditions: the worst case (min-max) or the '
+                        'weighted mean (default: worst)')
     parser.add_argument('--evaluate', action='store_true',
                         help='one recorded full-model run of --x0 (default the centre), no '
                              'optimisation')
@@ -337,6 +350,7 @@ def format_result(result) -> str:
                          f'{result.baseline_f:.6f}')
             lines += [f'  {name}: {value:.4g}' for name, value in
                       zip(result.physical_names, result.baseline_physical_values)]
+    lines += condition_lines(result)
     if len(result.metric_names):
         names = list(result.metric_names)
         lines.append('physical metrics:')
@@ -345,6 +359,26 @@ def format_result(result) -> str:
         lines += metric_lines(dict(zip(names, result.baseline_metrics)),
                               dict(zip(names, result.metrics)), title)
     return '\n'.join(lines)
+
+
+def condition_lines(result) -> list[str]:
+    """Per condition: the objective and the physical metrics, baseline -> reported."""
+    names = list(getattr(result, 'condition_names', []) or [])
+    if not names:
+        return []
+    metric_names = list(result.condition_metric_names)
+    k = len(metric_names)
+    lines = [f'conditions: {len(names)}, worst: {result.worst_condition} '
+             f'({result.n_rounds} rounds of full runs)']
+    for c, name in enumerate(names):
+        base_f = (f'{result.condition_baseline_f[c]:.4f} -> '
+                  if len(result.condition_baseline_f) else '')
+        f = f'{result.condition_f[c]:.4f}' if len(result.condition_f) else '-'
+        lines.append(f'condition {name}: f {base_f}{f}')
+        reported = dict(zip(metric_names, result.condition_metrics[c * k:(c + 1) * k]))
+        baseline = dict(zip(metric_names, result.condition_baseline_metrics[c * k:(c + 1) * k]))
+        lines += ['  ' + line for line in metric_lines(baseline, reported, 'optimum')]
+    return lines
 
 
 #: What rclpy's ActionClient raises (in the executor) when two servers accept one goal.
@@ -555,6 +589,15 @@ def main(argv: list[str] | None = None) -> int:
     try:  # checked here too, so that a typo is reported before any ROS set-up
         constraints = [ConstraintSpec.parse(text) for text in args.constraint]
         road = goal_road(args.road, args.repeat_road)
+        conditions = ''
+        if args.conditions:
+            from suspension_tuning.conditions import load_conditions
+
+            conditions = load_conditions(args.conditions).as_text()
+            if args.scenario != 'ride' or args.evaluate or constraints or road:
+                raise ValueError('--conditions: a condition set is for the ride optimisation '
+                                 '(no --evaluate, --constraint or --road: each condition '
+                                 'names its road)')
         x0 = start_point(args.start, args.n_vars) if args.start else args.x0
         if args.n_vars is None:
             args.n_vars = (start_size([t.partition('=')[0].strip() for t in args.start], None,
@@ -599,7 +642,8 @@ def main(argv: list[str] | None = None) -> int:
                              constraints=[Constraint(scenario=c.scenario, quantity=c.quantity,
                                                      upper_bound=c.upper_bound)
                                           for c in constraints],
-                             integrator=args.integrator, road=road)
+                             integrator=args.integrator, road=road, conditions=conditions,
+                             condition_form=args.condition_form if conditions else '')
         sending = client.send_goal_async(
             goal, feedback_callback=lambda fb: print(format_feedback(fb.feedback),
                                                      flush=True))

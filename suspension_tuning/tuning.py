@@ -294,6 +294,14 @@ class TuningRequest:
         road file or an entry as YAML (:func:`~suspension_tuning.vehicle.road.
         resolve_road`); '' = the configured one.  Checked here (a bad road file is a bad
         goal); the mixed scenario drives it too.
+    conditions : str
+        A set of operating conditions (:mod:`suspension_tuning.conditions`): a condition
+        file's path, or the set as JSON text (:meth:`ConditionSet.as_text`); '' = the
+        single condition of config/scenarios.yaml.  Ride only, without extra
+        constraints or a goal road (each condition names its road).  Checked here;
+        parsed into ``condition_set``.  Optimised by :func:`optimise_conditions`.
+    condition_form : str
+        'worst' (min-max in epigraph form; the default for '') or 'mean' (weighted).
     """
 
     scenario: str
@@ -306,7 +314,10 @@ class TuningRequest:
     integrator: str = ''
     correction: Mapping[str, Any] | None = None
     road: str = ''
+    conditions: str = ''
+    condition_form: str = ''
     start: Array = field(init=False, repr=False)
+    condition_set: Any = field(init=False, repr=False, default=None)
 
     def __post_init__(self) -> None:
         """Validate every field; raise ValueError naming the problem."""
@@ -328,6 +339,24 @@ class TuningRequest:
         object.__setattr__(self, 'correction',
                            CorrectionOptions.from_mapping(self.correction).as_dict())
         object.__setattr__(self, 'constraints', constraint_specs(self.constraints))
+        if self.conditions:
+            from suspension_tuning.conditions import ConditionSet, check_form
+
+            object.__setattr__(self, 'condition_form', check_form(self.condition_form))
+            if self.scenario != 'ride':
+                raise ValueError('operating conditions are for the ride scenario, not '
+                                 f'{self.scenario!r}')
+            if self.constraints:
+                raise ValueError('extra constraints do not combine with a condition set '
+                                 '(the tyre-hop constraints hold in every condition)')
+            if self.road:
+                raise ValueError('a goal road does not combine with a condition set: each '
+                                 'condition names its road')
+            object.__setattr__(self, 'condition_set', ConditionSet.from_text(self.conditions))
+        elif self.condition_form:
+            from suspension_tuning.conditions import check_form
+
+            check_form(self.condition_form)
         if self.road:
             from suspension_tuning.vehicle.road import resolve_road
             from suspension_tuning.vehicle.road_files import FileRoadSpec, file_length_m
@@ -864,3 +893,240 @@ class _ConstraintTerms:
         if all(v[2] is not None for v in simplified.values()):
             values = np.r_[primary_values, row_values]
         return df, np.vstack([np.asarray(dg, float).reshape(-1, request.n_vars), extra]), values
+
+
+# ---------------------------------------------------------------------------------------
+# A set of operating conditions (suspension_tuning.conditions) in one optimisation.
+
+#: Full model over conditions: (designs (m, n), conditions) -> one FullEvaluation per
+#: condition, in the conditions' order; all m x C runs may go out as one batch.
+ConditionModel = Callable[[Array, Sequence[Any]], list[FullEvaluation]]
+
+
+def combined_objective(f_conditions: ArrayLike, weights: ArrayLike, form: str) -> float:
+    """The objective over a condition set: the worst (max) or the weighted mean of f_c."""
+    f = np.asarray(f_conditions, float)
+    return float(np.max(f)) if form == 'worst' else float(np.dot(np.asarray(weights), f))
+
+
+class _ConditionTerms:
+    """Full runs per condition at each design (one batch of all conditions), cached."""
+
+    def __init__(self, model: ConditionModel, conditions: Sequence[Any],
+                 counter: RunCounter) -> None:
+        self.model = model
+        self.conditions = list(conditions)
+        self.counter = counter
+        #: x's bytes -> (f_c (C,), g_c (C, 4), metrics per condition)
+        self.values: dict[bytes, tuple[Array, Array, list[dict[str, float]]]] = {}
+
+    def batch(self, points: Array) -> tuple[Array, Array, list[list[dict[str, float]]]]:
+        """f (m, C), g (m, C, k) and metrics [m][C] of designs, one batch of m x C runs."""
+        points = np.atleast_2d(np.asarray(points, float))
+        runs = self.model(points, self.conditions)
+        self.counter.full_runs += len(points) * len(self.conditions)
+        f = np.column_stack([np.asarray(r.f, float) for r in runs])
+        g = np.stack([np.asarray(r.g, float).reshape(len(points), -1) for r in runs], axis=1)
+        metrics = [[{str(k): float(v) for k, v in zip(r.metric_names, np.asarray(r.metrics)[i])}
+                    if r.metrics is not None else {} for r in runs]
+                   for i in range(len(points))]
+        return f, g, metrics
+
+    def at(self, x: Array) -> tuple[Array, Array, list[dict[str, float]]]:
+        """Per-condition values of one design (runs only for a new design)."""
+        key = np.asarray(x, float).tobytes()
+        if key not in self.values:
+            f, g, metrics = self.batch(np.asarray(x, float)[None, :])
+            self.values[key] = (f[0], g[0], metrics[0])
+        return self.values[key]
+
+
+def optimise_conditions(request: TuningRequest, model: ConditionModel,
+                        gradients: Mapping[str, SimplifiedGradient] | None = None,
+                        callback: Callable[[dict[str, Any], RunCounter], bool | None]
+                        | None = None,
+                        counter: RunCounter | None = None) -> OptimizeResult:
+    """Dynamic-Q over a set of operating conditions (``request.condition_set``).
+
+    The objective is the weighted mean of the per-condition objectives (form 'mean') or
+    the worst of them (form 'worst'), posed in epigraph form for Dynamic-Q: one extra
+    variable t, minimise t subject to ``f_c(x) - t <= 0`` for every condition c, so
+    that the subproblems stay smooth (a max of functions has kinks where two cross).
+    The eq. 11 tyre-hop constraints hold in every condition (4 per condition).
+
+    Parameters
+    ----------
+    request : TuningRequest
+        The ride scenario with ``conditions`` set; no extra constraints.
+    model : callable
+        ``(designs (m, n), conditions) -> [FullEvaluation per condition]``: the full
+        model of every design in every condition; the m x C runs of one call may go out
+        as one batch over a pool of workers.
+    gradients : mapping, optional
+        Condition name -> the scaled simplified gradient in that condition
+        (``(x, inputs) -> (df, dg, values)``, calibrated for that condition); required
+        for gradient source 'simplified'.  Each condition's gradients are corrected by
+        a secant correction of its own (:mod:`suspension_tuning.optim.correction`)
+        from its full run at each iterate.
+    callback : callable, optional
+        Called with each iteration's record (x the design, f the combined objective,
+        g the tyre-hop constraints of every condition, ``condition_f``) and the run
+        counter; returning True stops the run.
+    counter : RunCounter, optional
+        Counter to continue (e.g. one holding the calibration runs).
+
+    Returns
+    -------
+    scipy.optimize.OptimizeResult
+        As :func:`optimise` (``x_best``, ``f_best`` the combined objective, ``g_best``
+        the 4 C tyre-hop constraints, ``best_iteration``, ``best_feasible``...), plus
+        ``condition_names``, ``condition_form``, ``condition_f_best`` (C,),
+        ``condition_g_best`` (C, 4), ``condition_metrics_best`` (one dict per condition)
+        and ``worst_condition`` (the condition with the largest f at the reported
+        design).  Full runs count condition-runs (a design in C conditions is C runs);
+        ``rounds`` counts the batches of full runs (one per evaluated design, 2n per
+        full-model gradient: the wall time with C workers).
+    """
+    from suspension_tuning.reported_design import best_record
+
+    conditions = request.condition_set
+    if conditions is None:
+        raise ValueError('optimise_conditions needs a request with conditions')
+    if request.gradient_source == 'simplified':
+        missing = [name for name in conditions.names if name not in (gradients or {})]
+        if missing:
+            raise ValueError(f"gradient source 'simplified' needs the simplified gradient of "
+                             f"every condition; missing: {', '.join(missing)}")
+    counter = counter or RunCounter()
+    terms = _ConditionTerms(model, conditions.conditions, counter)
+    n, n_c = request.n_vars, len(conditions)
+    weights = np.asarray(conditions.weights)
+    worst = request.condition_form == 'worst'
+    lower, upper = np.full(n, X_LOWER), np.full(n, X_UPPER)
+    rounds = [0]
+    x0 = request.start
+    start = x0
+    if worst:  # t starts at the worst condition's objective at x0 (that batch is x0's run)
+        f0 = terms.at(x0)[0]
+        rounds[0] += 1
+        spread = float(np.ptp(f0)) + 1.0
+        lower = np.r_[lower, float(np.min(f0)) - spread]
+        upper = np.r_[upper, float(np.max(f0)) + spread]
+        start = np.r_[x0, float(np.max(f0))]
+    options = DynamicQOptions.from_mapping(request.options).as_dict()
+    gtol = float(options['gtol'])
+    staircase = ([False] * n_c if worst else []) + [True] * (4 * n_c)
+    opt = DynamicQ(start, lower, upper, options, gradient_source=request.gradient_source,
+                   surrogate_rule_constraints=lambda m: staircase[:m] + [True] * (
+                       m - len(staircase)))
+    correction_options = CorrectionOptions.from_mapping(request.correction)
+    correct = request.gradient_source == 'simplified' and correction_options.method != 'none'
+    corrections: dict[str, SecantCorrection] = {}
+    records: list[dict[str, Any]] = []
+    cancelled = False
+
+    def problem_values(z: Array) -> tuple[float, Array]:
+        x = z[:n]
+        known = np.asarray(x, float).tobytes() in terms.values
+        f_c, g_c, _ = terms.at(x)
+        rounds[0] += 0 if known else 1
+        g_hop = g_c.reshape(-1)
+        if worst:
+            return float(z[n]), np.r_[f_c - z[n], g_hop]
+        return float(np.dot(weights, f_c)), g_hop
+
+    def problem_gradient(z: Array) -> tuple[Array, Array]:
+        x = z[:n]
+        if request.gradient_source == 'full':
+            def values(points: Array) -> Array:
+                f, g, _ = terms.batch(points)
+                rounds[0] += 1
+                return np.column_stack([f, g.reshape(len(points), -1)])
+
+            jac = central_difference(values, x, request.fd_step, lower[:n], upper[:n])
+            df_c, dg_c = jac[:n_c], jac[n_c:].reshape(n_c, -1, n)
+        else:
+            f_c, g_c, _ = terms.at(x)
+            rows_f, rows_g = [], []
+            for c, condition in enumerate(conditions.conditions):
+                df, dg, *rest = gradients[condition.name](x, None)
+                values = np.asarray(rest[0], float) if rest and rest[0] is not None else None
+                counter.simplified_runs += 2 * n + (values is not None)
+                jac = np.vstack([np.asarray(df, float), np.asarray(dg, float)])
+                if correct and values is not None:
+                    corr = corrections.get(condition.name)
+                    if corr is None:
+                        corr = corrections[condition.name] = SecantCorrection(
+                            jac.shape[0], n, correction_options.min_step)
+                    corr.observe(x, np.r_[f_c[c], g_c[c]], values)
+                    jac = corr.correct(jac)
+                rows_f.append(jac[0])
+                rows_g.append(jac[1:])
+            df_c, dg_c = np.asarray(rows_f), np.asarray(rows_g)
+        dg_hop = dg_c.reshape(-1, n)
+        if worst:
+            df = np.r_[np.zeros(n), 1.0]
+            dg = np.vstack([np.column_stack([df_c, -np.ones(n_c)]),
+                            np.column_stack([dg_hop, np.zeros(len(dg_hop))])])
+            return df, dg
+        return weights @ df_c, dg_hop
+
+    while (ask := opt.ask()) is not None:
+        kind, z = ask
+        try:
+            if kind == 'evaluate':
+                f, g = problem_values(z)
+                record = opt.tell((f, g, None))
+            else:
+                df, dg = problem_gradient(z)
+                record = opt.tell((df, dg, None), source=request.gradient_source)
+        except RunCancelled:
+            opt.stop('cancelled')
+            cancelled = True
+            break
+        if record is None:
+            continue
+        x = np.asarray(record['x'], float)[:n]
+        f_c, g_c, metrics = terms.at(x)
+        g_hop = g_c.reshape(-1)
+        out = {'iteration': int(record['iteration']), 'x': x,
+               'f': combined_objective(f_c, weights, request.condition_form),
+               'g': g_hop, 'rho': record['rho'], 'rho_next': record['rho_next'],
+               'max_violation': float(max(0.0, np.max(g_hop))),
+               'condition_f': f_c.tolist(), 'condition_metrics': metrics}
+        if worst:
+            out['epigraph_t'] = float(record['x'][n])
+        records.append(out)
+        if callback is not None and callback(out, counter):
+            opt.stop('cancelled')
+            cancelled = True
+            break
+    result = opt.result()
+    result.update(counter.as_dict(), scenario=request.scenario, n_vars=n,
+                  gradient_source=request.gradient_source, constraints=[],
+                  constraint_values=[], constraint_gradient_sources=[],
+                  condition_names=conditions.names, condition_form=request.condition_form,
+                  conditions=conditions.as_dict(), history=records, rounds=rounds[0],
+                  x=np.asarray(result.x, float)[:n], cancelled=cancelled,
+                  correction={name: c.summary() for name, c in corrections.items()}
+                  if corrections else {'method': 'none' if not correct else 'secant'})
+    best = best_record(records, gtol)
+    if best is not None:
+        k, feasible = best
+        rec = records[k]
+        f_c, g_c, metrics = terms.at(rec['x'])
+        result.update(x_best=np.asarray(rec['x'], float), f_best=float(rec['f']),
+                      g_best=np.asarray(rec['g'], float), best_iteration=rec['iteration'],
+                      best_feasible=feasible, max_violation_best=rec['max_violation'],
+                      constraint_values_best=[], condition_f_best=f_c.tolist(),
+                      condition_g_best=g_c.tolist(), condition_metrics_best=metrics,
+                      worst_condition=conditions.names[int(np.argmax(f_c))])
+    return result
+
+
+def condition_values(model: ConditionModel, x: ArrayLike, conditions: Sequence[Any]
+                     ) -> tuple[Array, list[dict[str, float]]]:
+    """f per condition (C,) and the metrics per condition of one design (C runs)."""
+    terms = _ConditionTerms(model, conditions, RunCounter())
+    f_c, _, metrics = terms.at(np.asarray(x, float))
+    return f_c, metrics

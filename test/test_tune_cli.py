@@ -484,3 +484,14 @@ def test_rclpys_error_for_a_goal_accepted_twice_is_caught_and_spinning_goes_on()
     other = Executor(RuntimeError('failed to initialize wait set'))
     with pytest.raises(RuntimeError, match='wait set'):
         spin(other, threading.Event())
+
+
+def test_tune_refuses_a_bad_condition_set_naming_file_condition_and_key(tmp_path, capsys):
+    from suspension_tuning.tune import main
+
+    path = tmp_path / 'conditions.yaml'
+    path.write_text('conditions:\n  - name: autobahn\n    speed_kmh: 200.0\n')
+    assert main(['--conditions', str(path)]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"error: {path}: condition 'autobahn': speed_kmh: 200 km/h is above the vehicle's "
+        'top speed 132 km/h (config/vehicle.yaml longitudinal.top_speed_kmh)')

@@ -489,13 +489,19 @@ class SimulationPool:
     def evaluate(self, scenario: str, n_vars: int, designs: np.ndarray,
                  return_inputs: bool = False, publish_telemetry: bool = False,
                  integrator: str = '', road: str = '',
-                 on_piece: Callable[[int], None] | None = None
+                 on_piece: Callable[[int], None] | None = None,
+                 conditions: Sequence[str] | None = None,
                  ) -> list[EvaluateDesign.Response]:
         """Evaluate designs (m, n_vars) on the workers; the responses in design order.
 
         ``integrator``: the full-model integrator ('' = each worker's parameter);
         ``road``: the ride road ('' = each worker's configured one); ``on_piece``:
-        called with the number of designs answered so far after each piece.
+        called with the number of designs answered so far after each piece;
+        ``conditions``: the operating condition of each design (JSON text,
+        EvaluateDesign.condition), so that one design in several conditions goes out
+        as one batch (a piece holds designs of one condition; list each condition's
+        designs together, condition after condition, for the responses to come in
+        design order).
         Telemetry (``publish_telemetry``) is that of the first design.
 
         Raises
@@ -514,7 +520,21 @@ class SimulationPool:
         # Sizes differing by one design at most: 16 designs for 2 workers are 6 pieces
         # of 3, 3, 3, 3, 2 and 2, which fall 8 and 8 on two equal workers.
         count = min(len(designs), max(1, usable) * self.pieces_per_worker)
-        pieces = np.array_split(np.arange(len(designs)), count)
+        if conditions is None:
+            pieces = np.array_split(np.arange(len(designs)), count)
+            piece_condition = [''] * len(pieces)
+        else:
+            if len(conditions) != len(designs):
+                raise ValueError(f'{len(conditions)} conditions for {len(designs)} designs')
+            groups: dict[str, list[int]] = {}
+            for index, condition in enumerate(conditions):
+                groups.setdefault(str(condition), []).append(index)
+            pieces, piece_condition = [], []
+            for condition, indices in groups.items():
+                share = max(1, round(count * len(indices) / len(designs)))
+                for piece in np.array_split(np.asarray(indices), min(share, len(indices))):
+                    pieces.append(piece)
+                    piece_condition.append(condition)
         queue = collections.deque(range(len(pieces)))
         running: dict[str, tuple[int, Any, float]] = {}  # worker -> (piece, future, sent)
         responses: dict[int, EvaluateDesign.Response] = {}
@@ -524,7 +544,8 @@ class SimulationPool:
             return EvaluateDesign.Request(
                 scenario=scenario, n_vars=n_vars, designs=designs[pieces[index]].ravel().tolist(),
                 publish_telemetry=publish_telemetry and index == 0,
-                return_inputs=return_inputs, integrator=integrator, road=road)
+                return_inputs=return_inputs, integrator=integrator, road=road,
+                condition=piece_condition[index])
 
         def abandon() -> None:
             for name, (_, future, _) in running.items():
@@ -563,7 +584,9 @@ class SimulationPool:
                 self._collect(running, queue, pieces, responses, on_piece)
         finally:
             abandon()
-        return [responses[i] for i in sorted(responses)]
+        if conditions is None:
+            return [responses[i] for i in sorted(responses)]
+        return [responses[i] for i in sorted(responses, key=lambda i: int(pieces[i][0]))]
 
     def _notify(self, _future: Any) -> None:
         with self._news:

@@ -35,6 +35,7 @@ import collections
 import dataclasses
 import math
 import subprocess
+import sys
 import threading
 import time
 from typing import Any
@@ -57,6 +58,7 @@ from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning.config_check import ConfigError, check_config
 from suspension_tuning.evaluation import scenarios as evaluation_scenarios
+from suspension_tuning.nodes._conditions import run_condition_goal
 from suspension_tuning.nodes._parameters import declare_numbers, read_only
 from suspension_tuning.nodes._pool import PoolEvent, pool_from_parameters
 from suspension_tuning.nodes._services import ServiceCallError, call
@@ -408,7 +410,8 @@ class CoordinatorNode(Node):
                              goal.gradient_source or 'simplified', options,
                              float(self.get_parameter('fd_step').value), constraints,
                              integrator=goal.integrator, correction=self.correction,
-                             road=goal.road)
+                             road=goal.road, conditions=goal.conditions,
+                             condition_form=goal.condition_form)
 
     def _publish_run_config(self, request: TuningRequest) -> None:
         config = {
@@ -426,6 +429,9 @@ class CoordinatorNode(Node):
             'simulation_models': self._worker_models(),
             'ride_road': ride_road_record(request.road),
         }
+        if request.condition_set is not None:
+            config.update(conditions=request.condition_set.as_dict(),
+                          condition_form=request.condition_form)
         stamp = f'started_unix_s: {time.time()!r}\n'
         self.config_pub.publish(String(data=dump_yaml(config) + stamp + self.static_config_yaml))
 
@@ -690,6 +696,9 @@ class CoordinatorNode(Node):
             message = Optimise.Result(success=False, message=f'refused: {refusal}')
             self.result_pub.publish(result_topic_message(message))
             return message
+        if request.condition_set is not None:
+            return run_condition_goal(self, goal_handle, request, fingerprint, t0,
+                                      sys.modules[__name__])
         self.get_logger().info(f'optimising {request.scenario} with {request.n_vars} '
                                f'variables, {request.gradient_source} gradients, model '
                                f'{fingerprint}')

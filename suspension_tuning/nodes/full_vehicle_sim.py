@@ -289,7 +289,11 @@ class FullVehicleSimNode(Node):
                 result = evaluation.evaluate(
                     request.scenario, designs, controllers=self._controllers(request, designs),
                     integrator=request.integrator or self.get_parameter('integrator').value,
-                    road=request.road)
+                    road=request.road, condition=request.condition)
+            elif request.condition:
+                raise ValueError('an FMU worker runs the vehicle and roads of its mapping '
+                                 '(docs/fmu.md); an operating condition is for the built-in '
+                                 'model')
             elif request.road:
                 raise ValueError('an FMU worker drives the roads its mapping names '
                                  '(docs/fmu.md); a request\'s road is for the built-in model')

@@ -37,6 +37,7 @@ from suspension_tuning_interfaces.msg import CalibrationProgress
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning import simplified_inputs
+from suspension_tuning.conditions import Condition
 from suspension_tuning.config_check import check_config
 from suspension_tuning.model_identity import ModelMismatchError
 from suspension_tuning.nodes._parameters import declare_numbers, read_only
@@ -92,6 +93,9 @@ class GradientEvaluatorNode(Node):
         if 'road' in key:  # a request's own road: a short hash of its identity
             tail += '_road_' + hashlib.sha256(json.dumps(key['road'], sort_keys=True)
                                               .encode()).hexdigest()[:12]
+        if 'condition' in key:  # an operating condition: a short hash of it
+            tail += '_condition_' + hashlib.sha256(str(key['condition']).encode()
+                                                   ).hexdigest()[:12]
         return self.calibration_dir / (f"v{key['calibration_version']}_"
                                        f"{key['scenario']}_{key['n_vars']}var_"
                                        f"{key['n_samples']}s_{key['seed']}_"
@@ -118,6 +122,8 @@ class GradientEvaluatorNode(Node):
                 key['integrator'] = request.integrator
             if request.road:  # and samples on a request's own road
                 key['road'] = road_identity(request.road)
+            if request.condition:  # and samples in an operating condition
+                key['condition'] = Condition.from_text(request.condition).as_text()
             path = self._cache_path(key)
             scaling = None
             if path.exists() and not request.force:
@@ -128,7 +134,8 @@ class GradientEvaluatorNode(Node):
                     self.get_logger().warning(f'stale calibration {path}: {error}')
             if scaling is None:  # the designs are sampled only now (~7 ms)
                 x, _, _ = calibration_designs(n_vars, n_samples, seed)
-                scaling = self._calibrate_remote(scenario, n_vars, x, key, request.road)
+                scaling = self._calibrate_remote(scenario, n_vars, x, key, request.road,
+                                                 request.condition)
                 response.n_full_runs = n_samples
                 path.parent.mkdir(parents=True, exist_ok=True)
                 scaling.save(path)
@@ -136,7 +143,7 @@ class GradientEvaluatorNode(Node):
             response.success, response.error = False, str(error)
             self.get_logger().error(f'calibration failed: {error}')
             return response
-        self.scalings[(scenario, n_vars, request.road)] = scaling
+        self.scalings[(scenario, n_vars, request.road, request.condition)] = scaling
         for function in scaling.functions:
             response.function_names.append(function.name)
             response.simplified_min.append(function.f_m_min)
@@ -154,7 +161,7 @@ class GradientEvaluatorNode(Node):
         return response
 
     def _calibrate_remote(self, scenario: str, n_vars: int, x: np.ndarray,
-                          key: dict, road: str = '') -> Scaling:
+                          key: dict, road: str = '', condition: str = '') -> Scaling:
         """Full-model samples from the simulation workers, then the eq. 25 fit."""
         # Only the handling model needs each sample's inputs (simplified_inputs.py).
         start = time.monotonic()
@@ -168,7 +175,9 @@ class GradientEvaluatorNode(Node):
             answers = self.pool.evaluate(scenario, n_vars, x,
                                          return_inputs=scenario == 'handling',
                                          integrator=key.get('integrator', ''), road=road,
-                                         on_piece=progress)
+                                         on_piece=progress,
+                                         conditions=[condition] * len(x) if condition
+                                         else None)
         except ValueError as error:
             raise ValueError(f'full-model samples failed: {error}') from error
         full_f = np.concatenate([np.asarray(a.f, dtype=float) for a in answers])
@@ -179,7 +188,8 @@ class GradientEvaluatorNode(Node):
         inputs = [simplified_inputs.unpack(scenario, message, x[i])
                   for i, message in enumerate(messages)] or None
         self.simplified_runs += len(x)
-        return fit_calibration(scenario, n_vars, x, full_f, full_g, inputs, key, road)
+        return fit_calibration(scenario, n_vars, x, full_f, full_g, inputs, key, road,
+                               condition=condition)
 
     # ----------------------------------------------------------------- gradient
     def _on_gradient(self, request: EvaluateGradient.Request,
@@ -188,13 +198,16 @@ class GradientEvaluatorNode(Node):
         try:
             scenario, n_vars = self._check(request.scenario, request.n_vars)
             x = validate_design(np.asarray(request.x, dtype=float), n_vars)[0]
-            scaling = self.scalings.get((scenario, n_vars, request.road))
+            scaling = self.scalings.get((scenario, n_vars, request.road, request.condition))
             if scaling is None:
                 road = f' on road {request.road!r}' if request.road else ''
+                if request.condition:
+                    road += f' in condition {Condition.from_text(request.condition).name!r}'
                 raise ValueError(f'no calibration for {scenario} with {n_vars} variables{road}: '
                                  'call ~/calibrate first (eq. 25 needs full-model samples)')
             step = float(request.step or self.get_parameter('default_step').value)
-            source = SimplifiedGradient(scenario, n_vars, scaling, step, request.road)
+            source = SimplifiedGradient(scenario, n_vars, scaling, step, request.road,
+                                        condition=request.condition)
             inputs = simplified_inputs.unpack(scenario, request.inputs, x)
             df, dg, values = source(x, inputs)
         except ValueError as error:

@@ -64,6 +64,7 @@ def simplified_values(
     scaling: Scaling | None = None,
     road: str = '',
     space: DesignSpace | None = None,
+    condition: str = '',
 ) -> Array:
     """Simplified-model values (batch, 1 + 4): objective then constraints FL..RR.
 
@@ -72,10 +73,11 @@ def simplified_values(
     :func:`~suspension_tuning.vehicle.metrics.soft_tyre_hop_constraints`, smooth in the
     design) or 'count' (eq. 11 as the full model counts it).  Scaled by eq. 25 when
     ``scaling`` is given.  ``road``: the ride road in place of the configured one.
-    ``space``: the design space (default config/design_space.yaml).
+    ``space``: the design space (default config/design_space.yaml).  ``condition``: an
+    operating condition as text (its speed, payload and road; ride only).
     """
     inp = as_simplified_inputs(scenario, inputs)
-    out = run_simplified(scenario, x, n_vars, inp, road, space)
+    out = run_simplified(scenario, x, n_vars, inp, road, space, condition)
     vals = np.column_stack([out['f'], out[constraint_measure_key()]])
     return scaling.apply(vals) if scaling is not None else vals
 
@@ -134,6 +136,7 @@ def fit_calibration(
     key: dict[str, Any],
     road: str = '',
     space: DesignSpace | None = None,
+    condition: str = '',
 ) -> Scaling:
     """Eq. 25 fit from full-model values at the calibration designs.
 
@@ -142,11 +145,13 @@ def fit_calibration(
     is the calibration's :func:`~suspension_tuning.optim.scaling.scaling_key`, kept
     with the scaling (the caller has it already: it names the cache file).  ``road``:
     the ride road of the full-model samples, which the pitch-plane model drives too.
-    ``space``: the design space (default config/design_space.yaml).
+    ``space``: the design space (default config/design_space.yaml).  ``condition``: the
+    operating condition of the samples as text (ride), which the simplified model runs in.
     """
     full = np.column_stack([np.asarray(full_f, dtype=float), np.asarray(full_g, dtype=float)])
     if scenario == 'ride':
-        simp = simplified_values('ride', x, n_vars, road=road, space=space)
+        simp = simplified_values('ride', x, n_vars, road=road, space=space,
+                                 condition=condition)
     else:
         if inputs is None or len(inputs) != len(x):
             raise ValueError('the handling calibration needs the full model inputs per sample')
@@ -165,6 +170,7 @@ def calibrate(
     run_full=None,
     model_fingerprint: str | None = None,
     space: DesignSpace | None = None,
+    condition: str = '',
 ) -> Scaling:
     """Fit the eq. 25 scaling from N full-model samples over the design space.
 
@@ -185,6 +191,10 @@ def calibrate(
     space : DesignSpace, optional
         The design space of the simplified models (default config/design_space.yaml;
         ``run_full`` must use the same).
+    condition : str, optional
+        Ride: an operating condition as text
+        (:meth:`suspension_tuning.conditions.Condition.as_text`); the default
+        ``run_full`` runs in it, the simplified model too, and the key holds it.
 
     Returns
     -------
@@ -193,12 +203,28 @@ def calibrate(
     """
     x, n_samples, seed = calibration_designs(n_vars, n_samples, seed)
     if run_full is None:
-        from suspension_tuning.vehicle.scenarios import run_scenario as run_full
+        if condition:
+            from suspension_tuning.conditions import (
+                Condition,
+                condition_params,
+                condition_scenarios,
+            )
+            from suspension_tuning.vehicle.scenarios import run_scenario
+
+            parsed = Condition.from_text(condition)
+
+            def run_full(name: str, designs: Array) -> Any:
+                return run_scenario(name, designs, condition_params(parsed),
+                                    config=condition_scenarios(parsed), space=space)
+        else:
+            from suspension_tuning.vehicle.scenarios import run_scenario as run_full
     res = run_full(scenario, x)
     inputs = [SimplifiedInputs.from_scenario_result(res, i) for i in range(n_samples)]
-    return fit_calibration(scenario, n_vars, x, res.f, res.g, inputs,
-                           scaling_key(scenario, n_vars, n_samples, seed, model_fingerprint),
-                           space=space)
+    key = scaling_key(scenario, n_vars, n_samples, seed, model_fingerprint)
+    if condition:
+        key['condition'] = condition
+    return fit_calibration(scenario, n_vars, x, res.f, res.g, inputs, key, space=space,
+                           condition=condition)
 
 
 def load_or_calibrate(
@@ -247,6 +273,8 @@ class SimplifiedGradient:
         entry as YAML); empty = the configured one.
     space : DesignSpace, optional
         The design space (default config/design_space.yaml).
+    condition : str, optional
+        Ride: an operating condition as text (its speed, payload and road); '' = none.
 
     Notes
     -----
@@ -264,6 +292,7 @@ class SimplifiedGradient:
         step: float | None = None,
         road: str = '',
         space: DesignSpace | None = None,
+        condition: str = '',
     ) -> None:
         if scenario not in ('ride', 'handling'):
             raise ValueError(f"unknown scenario {scenario!r}; valid: 'ride', 'handling'")
@@ -274,6 +303,9 @@ class SimplifiedGradient:
                     raise ValueError(f'scaling is for {k}={scaling.key[k]!r}, not {v!r}')
         self.scenario = scenario
         self.road = str(road)
+        self.condition = str(condition)
+        if self.condition and scenario != 'ride':
+            raise ValueError('operating conditions are for the ride scenario')
         self.n_vars = int(n_vars)
         self.scaling = scaling
         self.space = space
@@ -291,7 +323,7 @@ class SimplifiedGradient:
         xb = validate_design(x, self.n_vars)
         self.n_runs += xb.shape[0]
         return simplified_values(self.scenario, xb, self.n_vars, inputs, self.scaling,
-                                 self.road, self.space)
+                                 self.road, self.space, self.condition)
 
     def __call__(self, x: ArrayLike, inputs: Any = None) -> tuple[Array, Array, Array]:
         """Gradient of f (n,), Jacobian of g (4, n) and the values (5,) at x.

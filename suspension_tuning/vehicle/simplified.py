@@ -77,21 +77,35 @@ class SimplifiedInputs:
         return cls('handling', x, inputs)
 
 
-@functools.lru_cache(maxsize=4)
-def pitch_plane_model(road: str = '') -> PitchPlaneModel:
-    """The pitch-plane model (config files), built once per process and road.
+@functools.lru_cache(maxsize=16)
+def pitch_plane_model(road: str = '', condition: str = '') -> PitchPlaneModel:
+    """The pitch-plane model (config files), built once per process, road and condition.
 
     ``road``: the ride road in place of config/scenarios.yaml's (a road name, a road
     file or an entry as YAML, :func:`~suspension_tuning.vehicle.road.resolve_road`).
+    ``condition``: an operating condition as text
+    (:meth:`suspension_tuning.conditions.Condition.as_text`): its speed, payload and road
+    (the eq. 15-24 model's inputs follow them); '' = none.
     """
-    if not road:
+    if not road and not condition:
         return PitchPlaneModel()
     from .params import load_scenarios_config, load_vehicle_params
     from .pitch_plane import RideSetup
 
     params = load_vehicle_params()
     scenarios = load_scenarios_config()
-    scenarios['ride']['road'] = road
+    if road:
+        scenarios['ride']['road'] = road
+    if condition:
+        from suspension_tuning.conditions import (
+            Condition,
+            condition_params,
+            condition_scenarios,
+        )
+
+        parsed = Condition.from_text(condition)
+        params = condition_params(parsed, params)
+        scenarios = condition_scenarios(parsed, scenarios)
     return PitchPlaneModel(params, RideSetup.from_scenario_config(params, scenarios))
 
 
@@ -105,6 +119,7 @@ def run_simplified(
     scenario: str, x: np.ndarray, n_vars: int, inputs: SimplifiedInputs | None = None,
     road: str = '',
     space: DesignSpace | None = None,
+    condition: str = '',
 ) -> dict[str, np.ndarray]:
     """Evaluate the simplified model of a scenario for a batch of designs.
 
@@ -122,6 +137,8 @@ def run_simplified(
         Ride road in place of the configured one (:func:`pitch_plane_model`).
     space : DesignSpace, optional
         The design space (default config/design_space.yaml).
+    condition : str
+        Ride only: an operating condition as text (:func:`pitch_plane_model`).
 
     Returns
     -------
@@ -133,7 +150,7 @@ def run_simplified(
             f'unknown scenario {scenario!r}; valid: {", ".join(SIMPLIFIED_SCENARIOS)}'
         )
     if scenario == 'ride':
-        return pitch_plane_model(road).evaluate(x, n_vars, space)
+        return pitch_plane_model(road, condition).evaluate(x, n_vars, space)
     if inputs is None or inputs.handling is None:
         raise ValueError('the handling model needs SimplifiedInputs from a full handling run')
     if inputs.scenario != 'handling':

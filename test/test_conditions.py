@@ -1,0 +1,168 @@
+"""Operating conditions (suspension_tuning.conditions): a condition set is checked when it
+is read, in one line naming the file, the condition and the key; a payload moves the
+static loads as statics says; a condition set is optimised as a worst case or a weighted
+mean (suspension_tuning.tuning.optimise_conditions)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from suspension_tuning.conditions import (
+    Condition,
+    ConditionError,
+    ConditionSet,
+    condition_scenarios,
+    load_conditions,
+    payload_limits,
+    with_payload,
+)
+from suspension_tuning.tuning import (
+    FullEvaluation,
+    TuningRequest,
+    optimise_conditions,
+)
+from suspension_tuning.vehicle.params import load_vehicle_params
+from suspension_tuning.vehicle.strut import static_pressure_pa
+
+GOOD = """conditions:
+  - name: slow
+    speed_kmh: 30.0
+    payload: {mass_kg: 0.0}
+  - name: laden
+    speed_kmh: 50.0
+    payload: {mass_kg: 300.0, behind_front_axle_m: 2.5}
+    road: belgian_paving
+    weight: 2.0
+"""
+
+
+def _write(tmp_path, text):
+    path = tmp_path / 'conditions.yaml'
+    path.write_text(text)
+    return path
+
+
+def test_the_shipped_condition_set_is_three_speeds_unladen_and_laden():
+    conditions = load_conditions()
+    assert conditions.names == ['unladen_30', 'unladen_50', 'unladen_70',
+                                'laden_30', 'laden_50', 'laden_70']
+    assert sorted({c.speed_kmh for c in conditions.conditions}) == [30.0, 50.0, 70.0]
+
+
+def test_a_condition_set_round_trips_through_its_text(tmp_path):
+    conditions = load_conditions(_write(tmp_path, GOOD))
+    assert ConditionSet.from_text(conditions.as_text()) == conditions
+    assert conditions.weights == pytest.approx([1 / 3, 2 / 3])  # weights 1 and 2
+    assert Condition.from_text(conditions.conditions[1].as_text()) == conditions.conditions[1]
+
+
+@pytest.mark.parametrize('old, new, expected', [
+    ('road: belgian_paving', 'road: cobbles_of_atlantis',
+     "condition 'laden': road: "),
+    ('mass_kg: 300.0', 'mass_kg: 700.0',
+     "condition 'laden': payload.mass_kg: 700 kg is outside 0-650 kg"),
+    ('behind_front_axle_m: 2.5', 'behind_front_axle_m: 4.5',
+     "condition 'laden': payload.behind_front_axle_m: 4.5 m is outside the load space"),
+    ('speed_kmh: 50.0', 'speed_kmh: 150.0',
+     "condition 'laden': speed_kmh: 150 km/h is above the vehicle's top speed 132"),
+    ('speed_kmh: 50.0', 'speed_kmh: 100.0',
+     "condition 'laden': speed_kmh: the vehicle cannot hold 100 km/h over the run"),
+    ('weight: 2.0', 'weight: -1.0', "condition 'laden': weight: must be a number >= 0"),
+    ('speed_kmh: 50.0', 'speed_kmh: fast', "condition 'laden': speed_kmh: expected a number"),
+])
+def test_a_bad_condition_is_refused_naming_file_condition_and_key(tmp_path, old, new,
+                                                                  expected):
+    # 650 kg: gross vehicle mass 3050 kg less the 2400 kg vehicle (config/vehicle.yaml);
+    # 100 km/h: 3 s settling + 375 m of averaging need 461 m of the 450 m road
+    path = _write(tmp_path, GOOD.replace(old, new))
+    with pytest.raises(ConditionError) as error:
+        load_conditions(path)
+    assert str(error.value).startswith(f'{path}: {expected}'), str(error.value)
+
+
+def test_an_empty_set_and_weights_summing_to_zero_are_refused(tmp_path):
+    with pytest.raises(ConditionError, match=r'conditions: the set is empty'):
+        load_conditions(_write(tmp_path, 'conditions: []\n'))
+    zero = GOOD.replace('weight: 2.0', 'weight: 0.0').replace(
+        '    payload: {mass_kg: 0.0}\n', '    payload: {mass_kg: 0.0}\n    weight: 0.0\n')
+    with pytest.raises(ConditionError, match=r'conditions: the weights sum to 0'):
+        load_conditions(_write(tmp_path, zero))
+
+
+def test_a_payload_moves_the_static_loads_as_statics_says():
+    params = load_vehicle_params()
+    mass, position = 650.0, 2.9
+    laden = with_payload(params, mass, position)
+    g = params.g_mps2
+    # the four tyres carry the whole vehicle, payload included
+    total = 2 * (laden.static_tyre_load_front_n + laden.static_tyre_load_rear_n)
+    assert total == pytest.approx((params.mass_total_kg + mass) * g, rel=1e-12)
+    # moments about the front axle: the rear struts carry sprung weight x a / L
+    rear_gain = 2 * (laden.static_strut_load_rear_n - params.static_strut_load_rear_n)
+    assert rear_gain == pytest.approx(mass * g * position / params.wheelbase_m, rel=1e-12)
+    # the gas spring's static pressure follows: (p - p_atm) A_p = static strut load
+    p_rear = static_pressure_pa(laden.static_strut_load_rear_n, laden)
+    assert (p_rear - params.strut.atmospheric_pressure_pa) * params.strut.piston_area_m2 \
+        == pytest.approx(laden.static_strut_load_rear_n)
+    # the seats stay where they are on the body
+    assert laden.a_m - laden.driver_x_m == pytest.approx(params.a_m - params.driver_x_m)
+    assert with_payload(params, 0.0, 2.0) is params
+
+
+def test_a_condition_keeps_the_configured_averaging_distance():
+    ride = condition_scenarios(Condition('fast', 70.0))['ride']
+    # 30 s at 50 km/h with 3 s settling: 27 s of averaging = 375 m; at 70 km/h 19.29 s
+    assert ride['duration_s'] == pytest.approx(3.0 + 27.0 * 50.0 / 70.0)
+    assert payload_limits()['max_mass_kg'] == pytest.approx(650.0)
+
+
+# ----------------------------------------------------------------- the optimisation
+CENTRES = {'a': np.array([0.2, 0.3]), 'b': np.array([0.8, 0.5])}
+
+
+def _bowl_model(designs, conditions):
+    """f_c = |x - centre_c|^2, no tyre hop (g = -1): an analytic minimax problem."""
+    out = []
+    for condition in conditions:
+        d = np.atleast_2d(designs) - CENTRES[condition.name]
+        out.append(FullEvaluation(f=np.sum(d ** 2, axis=1), g=-np.ones((len(d), 4)),
+                                  metric_names=['dist_m'],
+                                  metrics=np.sqrt(np.sum(d ** 2, axis=1))[:, None]))
+    return out
+
+
+def _bowl_set(weight_b=1.0):
+    return ConditionSet((Condition('a', 30.0), Condition('b', 50.0, weight=weight_b)), 'test')
+
+
+def test_the_worst_case_form_finds_the_minimax_design(monkeypatch):
+    conditions = _bowl_set()
+    monkeypatch.setattr(ConditionSet, 'from_text', staticmethod(lambda text: conditions))
+    request = TuningRequest('ride', 2, gradient_source='full', conditions='set',
+                            condition_form='worst', options={'maxiter': 40})
+    result = optimise_conditions(request, _bowl_model)
+    # the minimax of two equal bowls lies halfway between their centres, f = |d/2|^2
+    half = 0.5 * (CENTRES['a'] + CENTRES['b'])
+    assert result.x_best == pytest.approx(half, abs=2e-3)
+    assert result.f_best == pytest.approx(np.sum((CENTRES['b'] - half) ** 2), rel=1e-2)
+    assert result.condition_names == ['a', 'b']
+    assert len(result.condition_metrics_best) == 2
+    assert result.condition_metrics_best[0]['dist_m'] == pytest.approx(
+        math.sqrt(result.condition_f_best[0]))
+    # every design runs in both conditions, counted per condition; a round is one batch
+    # (a design's runs, or the 2n central-difference designs' runs)
+    assert result.n_full_runs % 2 == 0
+    assert result.rounds < result.n_full_runs / 2
+
+
+def test_the_weighted_mean_form_finds_the_weighted_centre(monkeypatch):
+    conditions = _bowl_set(weight_b=3.0)
+    monkeypatch.setattr(ConditionSet, 'from_text', staticmethod(lambda text: conditions))
+    request = TuningRequest('ride', 2, gradient_source='full', conditions='set',
+                            condition_form='mean', options={'maxiter': 40})
+    result = optimise_conditions(request, _bowl_model)
+    # the minimum of 1/4 |x - a|^2 + 3/4 |x - b|^2 is the weighted mean of the centres
+    centre = 0.25 * CENTRES['a'] + 0.75 * CENTRES['b']
+    assert result.x_best == pytest.approx(centre, abs=2e-3)
+    assert result.worst_condition == 'a'  # farther from the weighted centre

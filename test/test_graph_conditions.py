@@ -1,0 +1,133 @@
+"""A goal over a set of operating conditions, through the graph.
+
+Three conditions (50 km/h unladen and laden, 70 km/h unladen): the coordinator
+calibrates each condition's simplified model in it, sends a design's runs in every
+condition as one batch, and reports per condition the objective and the physical
+metrics of the reported design and of the baseline, with the worst condition; the bag
+records the condition set and the result.
+"""
+
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+
+pytestmark = pytest.mark.ros
+
+SAMPLES = 4  # eq. 25 samples per condition: the 4 corners of the 2-variable box
+NAMES = ['unladen_50', 'laden_50', 'unladen_70']
+
+
+@pytest.fixture
+def graph(ros_context, tmp_path):
+    from rclpy.node import Node
+
+    from suspension_tuning.graph import SpinningGraph, build_nodes
+
+    topics = ['/optimisation/run_config', '/optimisation/progress', '/optimisation/result']
+    nodes = build_nodes(workers=1, record=True, context=ros_context, overrides={
+        'gradient_evaluator': [Parameter('calibration_dir', value=str(tmp_path))],
+        'coordinator': [Parameter('calibration_samples', value=SAMPLES),
+                        Parameter('final_telemetry', value=False)],
+        'recorder': [Parameter('output_dir', value=str(tmp_path / 'bags')),
+                     Parameter('topics', value=topics), Parameter('post_run_s', value=0.2)]})
+    client_node = Node('conditions_client', context=ros_context)
+    spinning = SpinningGraph(nodes, [client_node])
+    try:
+        yield nodes, client_node
+    finally:
+        spinning.shutdown()
+
+
+def _run(client_node, goal):
+    from rclpy.action import ActionClient
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning.nodes._spin import wait_future
+
+    client = ActionClient(client_node, Optimise, '/coordinator/optimise')
+    assert client.wait_for_server(timeout_sec=10.0)
+    handle = wait_future(client.send_goal_async(goal), 30.0)
+    return wait_future(handle.get_result_async(), 300.0).result
+
+
+def test_a_three_condition_goal_reports_every_condition_in_the_result_and_the_bag(graph,
+                                                                                  tmp_path):
+    import time
+
+    import yaml
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning import evaluation
+    from suspension_tuning.bag.reader import decode, read_messages
+    from suspension_tuning.conditions import ConditionSet, load_conditions
+    from suspension_tuning.inspect_bag import _format, summary, write_plots
+    from suspension_tuning.nodes._conditions import CONDITION_METRICS
+    from suspension_tuning.nodes.recorder import RecorderNode
+    from suspension_tuning.physical_metrics import physical_metrics
+    from suspension_tuning.tune import format_result
+    from suspension_tuning.vehicle.design import load_design_space
+
+    nodes, client_node = graph
+    shipped = load_conditions()
+    conditions = ConditionSet(tuple(c for name in NAMES for c in shipped.conditions
+                                    if c.name == name), 'test')
+    result = _run(client_node, Optimise.Goal(
+        scenario='ride', n_vars=2, gradient_source='simplified', max_iterations=3,
+        conditions=conditions.as_text(), condition_form='worst'))
+    assert len(result.x) == 2, result.message
+    assert list(result.condition_names) == NAMES
+    assert result.n_calibration_runs == 3 * SAMPLES  # each condition calibrated in it
+    assert result.n_full_runs % 3 == 0  # a design runs in the 3 conditions
+    assert 0 < result.n_rounds <= result.n_full_runs // 3
+    # The reported design and the baseline in each condition, in-process: the same bits.
+    k = len(CONDITION_METRICS)
+    x_base = load_design_space().baseline_x(2)
+    for c, condition in enumerate(conditions.conditions):
+        for x, f_field, metrics_field in ((result.x, 'condition_f', 'condition_metrics'),
+                                          (x_base, 'condition_baseline_f',
+                                           'condition_baseline_metrics')):
+            run = evaluation.evaluate('ride', np.asarray(x)[None, :],
+                                      condition=condition.as_text())
+            assert getattr(result, f_field)[c] == run.f[0]
+            shown = physical_metrics('ride', run.metric_names, run.metrics[0])
+            assert list(getattr(result, metrics_field)[c * k:(c + 1) * k]) == pytest.approx(
+                [shown[name] for name in CONDITION_METRICS], rel=1e-12)
+    assert result.worst_condition == NAMES[int(np.argmax(result.condition_f))]
+    assert result.f == pytest.approx(max(result.condition_f))  # the worst-case objective
+    assert result.baseline_f == pytest.approx(max(result.condition_baseline_f))
+    report = format_result(result)  # what tune prints: every condition, the worst named
+    assert f'worst: {result.worst_condition}' in report
+    assert all(f'condition {name}: f ' in report for name in NAMES)
+    # The bag: the condition set in the run configuration, the per-condition result.
+    recorder = next(n for n in nodes if isinstance(n, RecorderNode))
+    deadline = time.monotonic() + 30.0
+    while not recorder.session.closed_bags and time.monotonic() < deadline:
+        time.sleep(0.05)
+    contents = read_messages(recorder.session.closed_bags[0])
+    config = yaml.safe_load(contents.metadata['run_config']['yaml'])
+    assert [c['name'] for c in config['conditions']['conditions']] == NAMES
+    assert config['condition_form'] == 'worst'
+    recorded = decode(contents, contents.on('/optimisation/result')[0])
+    assert list(recorded.condition_metrics) == list(result.condition_metrics)
+    assert recorded.worst_condition == result.worst_condition
+    # inspect_bag reads them back per condition
+    bag = recorder.session.closed_bags[0]
+    table = summary(bag)['optimum']['conditions']
+    assert table['worst'] == result.worst_condition
+    assert table['per_condition'][NAMES[1]]['physical_metrics']['reported'] == dict(
+        zip(CONDITION_METRICS, result.condition_metrics[k:2 * k]))
+    assert f'condition {NAMES[2]}: f baseline' in _format(summary(bag))
+    plots = write_plots(bag, tmp_path / 'plots')
+    assert tmp_path / 'plots' / 'conditions.png' in plots
+
+
+def test_a_bad_condition_set_is_a_bad_goal(graph):
+    from suspension_tuning_interfaces.action import Optimise
+
+    _, client_node = graph
+    result = _run(client_node, Optimise.Goal(
+        scenario='ride', n_vars=2, gradient_source='simplified',
+        conditions='{"conditions": [{"name": "heavy", "speed_kmh": 50.0, '
+                   '"payload": {"mass_kg": 2000.0, "behind_front_axle_m": 2.0}}]}'))
+    assert not result.success
+    assert "condition 'heavy': payload.mass_kg: 2000 kg is outside 0-650 kg" in result.message
