@@ -15,8 +15,9 @@ points ``0.001 + 0.999 * scipy.stats.qmc.LatinHypercube(d=4, seed=7).random(4)``
   the built-in model's noise levels (config/optimiser.yaml ``noise_levels``) and the
   answer checked at DOPRI5 1e-6 after the stop (continued with shifted constraints when
   the check finds it infeasible; ``suspension_tuning.answer_check``).  Its eq. 25
-  calibration: ``method_benchmark.BENCH_CALIBRATION_SAMPLES`` (none on the ride, the 4
-  corners on handling; docs/corrected_gradients.md);
+  calibration: what a tuning run spends by default (config/simplified_models.yaml
+  ``scaling.run_samples``, ``method_benchmark.bench_calibration_samples``: none on the
+  ride, 4 on handling; docs/corrected_gradients.md);
 * Dynamic-Q with full-model central differences (``common.run_dynamic_q(..., 'full')``);
 * SciPy SLSQP with its default 2-point forward differences (step 1.49e-8).  On the
   noisy model also with More & Wild's noise-optimal step
@@ -75,21 +76,22 @@ Definitions (``suspension_tuning.studies.method_benchmark``):
   the smallest of their ``paid_ratio_vs_best_peer``.
 * **Ratios**: ``full_runs_ratio_vs_slsqp`` and ``full_runs_ratio_vs_dq_full``: median
   full runs to solve of the other method over ours; ``..._with_calibration``: over
-  ours plus the 16 calibration runs.  A ratio whose numerator is not reached (the
-  other method solves half of the starts or fewer) prints ``inf``; ours not reached
-  prints 0.  ``optimum_gap_pct`` is our largest gap over the 6 starts.
+  ours plus its calibration runs (``ride4_calibration_runs``).  A ratio whose
+  numerator is not reached (the other method solves half of the starts or fewer)
+  prints ``inf``; ours not reached prints 0.  ``optimum_gap_pct`` is our largest gap
+  over the 6 starts.
 * **Peers**: ``peer_best_full_runs_ride4``: for each peer (the four above and the SLSQP
   variants, full runs to solve beyond 300 counting as not reached) the median over the
   6 starts of its full runs to solve (``inf`` where not reached); the figure is the
   smallest of those medians (``peer_best_ride4`` names the peer).
   ``full_runs_ratio_vs_best_peer``: that figure over our median full runs to solve;
-  ``..._with_calibration``: over ours plus the 16 calibration runs.  ``_noisy``: the
+  ``..._with_calibration``: over ours plus its calibration runs.  ``_noisy``: the
   same on the variable-step model.  Goal: >= 5 without calibration, >= 2 with it.
 
 Prints ``name: value`` lines: per start, ours' gap, largest violation, full runs to solve
 and total full runs; then ``ride4_starts_within_1pct`` (target 6),
 ``ride4_median_gap_pct`` (<= 0.5), ``ride4_max_gap_pct`` (<= 1),
-``ride4_median_full_runs`` (<= 20), ``ride4_calibration_runs`` (16) and
+``ride4_median_full_runs`` (<= 20), ``ride4_calibration_runs`` (0: none on the ride) and
 ``ride4_max_final_violation`` (<= 0.005); the same with suffix ``_noisy`` (targets:
 median gap <= 1 %, max gap <= 2 %), plus ``ride4_max_final_violation_noisy_fixed_step``;
 the ratios and ``optimum_gap_pct`` (``..._noisy``: the noisy model's), and the wall time.

@@ -73,14 +73,20 @@ def resume(bag: str | os.PathLike[str], max_iterations: int | None = None,
               for name in (request.scenario, *request.constraint_scenarios)}
     gradients = {}
     if request.gradient_source == 'simplified':
-        from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
+        from suspension_tuning.optim.simplified_gradient import (
+            SimplifiedGradient,
+            calibrate,
+            run_calibration_samples,
+        )
 
+        # the run's coordinator parameter: -1 (or a bag without it) = each case's default
         samples = (config.get('coordinator_parameters') or {}).get('calibration_samples')
         sources = request.constraint_gradient_sources()
         for name in dict.fromkeys([request.scenario, *(
                 c.scenario for c, s in zip(request.constraints, sources) if s == 'simplified')]):
-            scaling = calibrate(name, request.n_vars, n_samples=samples)
-            counter.calibration_runs += len(scaling.x_samples)
+            n_samples = run_calibration_samples(name, request.n_vars, samples)
+            scaling = calibrate(name, request.n_vars, n_samples=n_samples) if n_samples else None
+            counter.calibration_runs += n_samples
             gradients[name] = SimplifiedGradient(name, request.n_vars, scaling,
                                                  request.fd_step)
     # the built-in model runs here: its noise levels and the check of the answer, as the

@@ -303,6 +303,16 @@ def format_feedback(feedback: Optimise.Feedback) -> str:
             f'{latest.n_simplified_runs:4d}  x = [{x}]' + (f'  {physical}' if physical else ''))
 
 
+def paid_full_runs(result) -> int:
+    """Every full-model run the goal spent: its calibration's samples (0 when the eq. 25
+    scaling came from the cache or the case has none), the optimisation's runs and the
+    check of the answer (in ``n_full_runs``); what the method benchmark counts as paid
+    (``method_benchmark.paid_full_runs``).  The baseline and telemetry runs of the
+    report are not part of the optimisation.
+    """  # noqa: D205
+    return int(result.n_full_runs) + int(result.n_calibration_runs)
+
+
 def format_result(result) -> str:
     """Format the action result as a report, physical units at the edge.
 
@@ -331,6 +341,8 @@ def format_result(result) -> str:
     lines += [f'iterations: {result.iterations}', f'full-model runs: {result.n_full_runs}',
               f'simplified-model runs: {result.n_simplified_runs}',
               f'calibration full-model runs: {result.n_calibration_runs}',
+              f'paid full-model runs: {paid_full_runs(result)} (calibration, optimisation '
+              'and check)',
               f'wall time: {result.wall_time_s:.1f} s']
     if result.model_fingerprint:
         lines.append(f'full model: fingerprint {result.model_fingerprint}')

@@ -67,3 +67,29 @@ def test_demo_report_shows_the_physical_metrics_of_the_baseline_and_the_optimum(
     assert seat.split()[-2:] == ['1.500', '1.250']  # baseline, then the optimum
     lift = next(line for line in lines if 'lift-off time RL (%)' in line)
     assert lift.split()[-2:] == ['2.000', '0.500']
+
+
+def test_demo_waits_for_the_bag_while_the_recorder_records_and_not_when_it_stalls():
+    import threading
+    import time
+    from types import SimpleNamespace
+
+    import pytest
+
+    from suspension_tuning.demo import wait_for_bag
+
+    recorder = SimpleNamespace(received=0, session=SimpleNamespace(closed_bags=[]))
+
+    def drain() -> None:  # a recorder still recording 3 stall periods after the result
+        for _ in range(12):
+            time.sleep(0.05)
+            recorder.received += 1
+        recorder.session.closed_bags.append('bag')
+
+    worker = threading.Thread(target=drain)
+    worker.start()
+    wait_for_bag(recorder, 0, stall_s=0.2)  # 0.6 s in all: waits, since it records
+    worker.join()
+    assert recorder.session.closed_bags == ['bag']
+    with pytest.raises(TimeoutError, match='nothing recorded for 0.2 s'):
+        wait_for_bag(recorder, 1, stall_s=0.2)  # nothing recorded, no bag closed

@@ -75,6 +75,44 @@ def test_ride_optimisation_with_simplified_gradients_converges_through_the_graph
     assert result.n_simplified_runs == local.n_simplified_runs
 
 
+def test_a_ride_goal_by_default_spends_no_calibration_and_pays_what_the_benchmark_counts(
+        graph):
+    from rclpy.action import ActionClient
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning.optim.simplified_gradient import SimplifiedGradient
+    from suspension_tuning.studies import common
+    from suspension_tuning.studies import method_benchmark as mb
+    from suspension_tuning.tune import format_result, paid_full_runs
+
+    # -1: each case's default, config/simplified_models.yaml scaling.run_samples
+    # (ride, 2 variables: none, unit scaling corrected along the run)
+    graph['coordinator'].set_parameters([Parameter('calibration_samples', value=-1)])
+    client = ActionClient(graph['client'], Optimise, '/coordinator/optimise')
+    assert client.wait_for_server(timeout_sec=10.0)
+    feedback = []
+    handle = wait(client.send_goal_async(
+        Optimise.Goal(scenario='ride', n_vars=2, gradient_source='simplified'),
+        feedback_callback=feedback.append))
+    result = wait(handle.get_result_async()).result
+    assert result.success, result.message
+    assert result.n_calibration_runs == 0
+    phases = [m.feedback.phase for m in feedback]
+    assert 'calibration' not in phases  # no samples, so no sample progress
+    [note] = [m.feedback.note for m in feedback if m.feedback.phase == 'calibration_fit']
+    assert 'no eq. 25 calibration (0 full-model samples' in note
+    # The benchmark's run of ours from the same start (the goal's default: the centre)
+    samples = mb.bench_calibration_samples('ride', 2)
+    assert samples == 0
+    run = mb.run_method('dq_simplified', 'ride', 2, 'centre', common.start_point('centre', 2),
+                        mb.REFERENCE_INTEGRATOR,
+                        SimplifiedGradient('ride', 2, None, common.FD_STEP),
+                        calibration_samples=samples)
+    np.testing.assert_array_equal(result.x, run.x)
+    assert paid_full_runs(result) == run.n_full_runs + run.n_calibration_runs
+    assert f'paid full-model runs: {paid_full_runs(result)} ' in format_result(result)
+
+
 def test_gradient_service_errors_and_calibration_cache(graph, monkeypatch):
     from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 

@@ -439,3 +439,34 @@ def test_session_closes_a_finished_run_at_post_run_max_s_whatever_still_arrives(
     # ... until the 5 s cap: the message at 5 s finds the bag due and closes it first
     assert session.write('/telemetry', serialize_message(String(data='x')),
                          t + 5 * second) is not None
+
+
+def test_session_is_not_kept_open_by_messages_published_after_the_result(tmp_path):
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from suspension_tuning.bag.reader import read_messages
+    from suspension_tuning.bag.recorder import RecordingSession
+
+    session = RecordingSession(tmp_path, per_run=True, pre_run_s=1.0, post_run_s=1.0)
+    for topic in ('/optimisation/run_config', '/telemetry', '/status', '/optimisation/result'):
+        session.add_topic(topic, 'std_msgs/msg/String')
+    t = 1_700_000_000_000_000_000
+    second = 1_000_000_000
+    session.write('/optimisation/run_config', serialize_message(String(data='scenario: ride')), t)
+    session.write('/optimisation/result', serialize_message(String(data='r')), t + second,
+                  publish_time_ns=t + second)
+    # the run's telemetry, published before the result, served 0.5 s after it: the 1 s
+    # grace restarts (bag due 1.5 s after the result)
+    session.write('/telemetry', serialize_message(String(data='late')), t + second // 2,
+                  publish_time_ns=t + second // 2, now_ns=t + 3 * second // 2)
+    # a status published 1.2 s after the result (past the 1 s grace on the publisher's
+    # clock): recorded, but the bag stays due 1.5 s after the result
+    assert session.write('/status', serialize_message(String(data='expired')),
+                         t + 11 * second // 5, publish_time_ns=t + 11 * second // 5,
+                         now_ns=t + 11 * second // 5) is None
+    closed = session.flush(now_ns=t + 5 * second // 2)  # 1 s after the telemetry
+    assert closed is not None
+    topics = [m.topic for m in read_messages(closed).messages]
+    assert topics == ['/optimisation/run_config', '/telemetry', '/optimisation/result',
+                      '/status']

@@ -116,3 +116,23 @@ def test_calibration_settings_default_to_the_config_and_match_the_designs():
     assert calibration_settings(12, 5) == (12, 5)
     x, n_samples, seed = calibration_designs(2, 12)
     assert (n_samples, seed) == calibration_settings(12) and x.shape == (12, 2)
+
+
+def test_a_runs_calibration_samples_default_per_case_and_refuse_one():
+    import pytest
+
+    from suspension_tuning.optim.simplified_gradient import (
+        calibration_settings,
+        run_calibration_samples,
+    )
+
+    # config/simplified_models.yaml scaling.run_samples: none on the ride, 4 on handling
+    # (measured paid full runs, docs/corrected_gradients.md); an unlisted size (8
+    # variables) takes scaling.n_samples
+    assert run_calibration_samples('ride', 4) == run_calibration_samples('ride', 2, -1) == 0
+    assert run_calibration_samples('handling', 4, None) == 4
+    assert run_calibration_samples('ride', 8) == calibration_settings()[0]
+    assert run_calibration_samples('ride', 4, 0) == 0  # given: none
+    assert run_calibration_samples('handling', 4, 16) == 16
+    with pytest.raises(ValueError, match='at least 2 samples'):
+        run_calibration_samples('ride', 4, 1)

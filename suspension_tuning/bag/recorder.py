@@ -109,7 +109,10 @@ class RecordingSession:
         this long (log time, s) after its result, for messages of the run still queued
         on other topics (the executor serves topics in no particular order; the
         reported design's telemetry is published just before the result, and on a
-        busy machine its burst takes longer than any fixed grace to drain).
+        busy machine its burst takes longer than any fixed grace to drain).  Only
+        messages published before the result (their publish time, within
+        ``post_run_s``) restart the grace; later ones are recorded while the bag is
+        open but do not keep it open.
     post_run_max_s : float
         With ``per_run``: the bag closes at the latest this long after the result,
         whatever still arrives.
@@ -143,6 +146,7 @@ class RecordingSession:
         self.post_run_max_ns = int(max(post_run_max_s, post_run_s) * 1e9)
         self._close_at_ns: int | None = None
         self._close_by_ns: int | None = None
+        self._result_sent_ns: int | None = None  # the finished run's result, publish time
         self._held: deque[tuple[str, bytes, int, int | None]] = deque()
         self._lock = threading.Lock()
 
@@ -173,7 +177,7 @@ class RecordingSession:
         return self.bag
 
     def _close_bag(self) -> Path | None:
-        self._close_at_ns = self._close_by_ns = None
+        self._close_at_ns = self._close_by_ns = self._result_sent_ns = None
         if self.bag is None:
             return None
         path = self.bag.close()
@@ -235,12 +239,25 @@ class RecordingSession:
                 now_ns = log_time_ns if now_ns is None else max(now_ns, log_time_ns)
                 self._close_at_ns = now_ns + self.post_run_ns
                 self._close_by_ns = now_ns + self.post_run_max_ns
-            elif self._close_at_ns is not None and self._close_by_ns is not None:
+                self._result_sent_ns = log_time_ns if publish_time_ns is None else publish_time_ns
+            elif (self._close_at_ns is not None and self._close_by_ns is not None
+                  and self._of_the_run(publish_time_ns)):
                 # a message of the finished run: wait post_run_s after the last one
                 now_ns = log_time_ns if now_ns is None else now_ns
                 self._close_at_ns = min(self._close_by_ns,
                                         max(self._close_at_ns, now_ns + self.post_run_ns))
             return closed
+
+    def _of_the_run(self, publish_time_ns: int | None) -> bool:
+        """A message published before the finished run's result (within ``post_run_s``
+        for clocks of other hosts), or of unknown publish time.
+
+        Only those keep the bag open: the run's telemetry burst still queued, not what
+        the graph publishes after the run (the goal's status when its result expires,
+        log lines), which would otherwise hold the bag open up to ``post_run_max_s``.
+        """  # noqa: D205
+        return (publish_time_ns is None or self._result_sent_ns is None
+                or publish_time_ns <= self._result_sent_ns + self.post_run_ns)
 
     def _prune_held(self, now_ns: int) -> None:
         while self._held and self._held[0][2] < now_ns - self.pre_run_ns:

@@ -26,6 +26,7 @@ from suspension_tuning_interfaces.msg import IterationRecord, TimeHistories
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
 from suspension_tuning.nodes._services import ServiceCallError, call
+from suspension_tuning.optim.simplified_gradient import run_calibration_samples
 from suspension_tuning.physical_metrics import SHOWN, physical_metrics
 from suspension_tuning.tuning import (
     FullEvaluation,
@@ -97,11 +98,13 @@ def condition_gradient(node: Any, request: TuningRequest, condition: Any):
 def calibrate_condition(node: Any, goal_handle: Any, request: TuningRequest,
                         condition: Any) -> int:
     """Calibrate the simplified ride model in one condition; the full runs it spent."""
+    samples = run_calibration_samples(
+        'ride', request.n_vars, int(node.get_parameter('calibration_samples').value))
     node._calibrating = (goal_handle, 'ride', request.n_vars)
     try:
         response = call(node, node.calibrate_client, Calibrate.Request(
-            scenario='ride', n_vars=request.n_vars,
-            n_samples=int(node.get_parameter('calibration_samples').value), force=False,
+            scenario='ride', n_vars=request.n_vars, n_samples=samples,
+            unit_scaling=samples == 0, force=False,
             integrator=request.integrator, model_fingerprint=node.pool.fingerprint,
             condition=condition.as_text()), node.timeout_s * 2, node._stopped)
     finally:

@@ -8,7 +8,10 @@ iteration asks the simulation workers (``/<worker>/evaluate``) for the full-mode
 objective and constraints and the gradient evaluator (``<gradient_node>/gradient``)
 for the scaled simplified-model gradient, or the workers for 2n full-model central
 differences.  Before a run with simplified gradients the gradient evaluator is
-calibrated (eq. 25, ``calibrate``) for every scenario with simplified terms.
+calibrated (eq. 25, ``calibrate``) for every scenario with simplified terms, with the
+``calibration_samples`` parameter's samples or, by default, each case's of
+config/simplified_models.yaml ``scaling.run_samples`` (none on the ride: unit scaling,
+which the run's first-order correction maps onto the full model; 4 on handling).
 
 Feedback every iteration; the result holds the reported design (the best feasible
 iterate, or the least violating one when none was feasible, and says which; also in
@@ -66,6 +69,7 @@ from suspension_tuning.nodes._spin import run_node
 from suspension_tuning.optim.correction import load_correction_options
 from suspension_tuning.optim.dynamic_q import load_options
 from suspension_tuning.optim.scaling import fit_note, load_min_fit_r2, poor_fits
+from suspension_tuning.optim.simplified_gradient import run_calibration_samples
 from suspension_tuning.paths import config_dir, dump_yaml, read_yaml
 from suspension_tuning.physical_metrics import SHOWN, physical_metrics
 from suspension_tuning.reported_design import design_success, reported_design, result_message
@@ -286,7 +290,9 @@ class CoordinatorNode(Node):
         check_config(builtin_model=False)  # ConfigError: one line, before the node exists
         super().__init__('coordinator', **kwargs)
         self.declare_parameter('gradient_node', '/gradient_evaluator')
-        declare_numbers(self, {'call_timeout_s': 600.0, 'calibration_samples': 16,
+        # calibration_samples: eq. 25 samples per simplified scenario; -1 = each case's
+        # default (config/simplified_models.yaml scaling.run_samples), 0 = none.
+        declare_numbers(self, {'call_timeout_s': 600.0, 'calibration_samples': -1,
                                'fd_step': 0.025})
         self.declare_parameter('optimiser_config', '')
         self.declare_parameter('optimiser_section', 'vehicle')
@@ -533,11 +539,13 @@ class CoordinatorNode(Node):
     def _calibrate(self, goal_handle, request: TuningRequest, scenario: str | None = None
                    ) -> Calibrate.Response:
         scenario = scenario or request.scenario
+        samples = run_calibration_samples(
+            scenario, request.n_vars, int(self.get_parameter('calibration_samples').value))
         self._calibrating = (goal_handle, scenario, request.n_vars)
         try:
             response = call(self, self.calibrate_client, Calibrate.Request(
-                scenario=scenario, n_vars=request.n_vars,
-                n_samples=int(self.get_parameter('calibration_samples').value), force=False,
+                scenario=scenario, n_vars=request.n_vars, n_samples=samples,
+                unit_scaling=samples == 0, force=False,
                 integrator=request.integrator, model_fingerprint=self.pool.fingerprint,
                 road=request.road),
                 self.timeout_s * 2, self._stopped)
@@ -549,7 +557,19 @@ class CoordinatorNode(Node):
 
     def _check_fit(self, goal_handle, request: TuningRequest, scenario: str,
                    response: Calibrate.Response) -> None:
-        """Feedback and log the calibration's fit; refuse one below the threshold."""
+        """Feedback and log the calibration's fit; refuse one below the threshold.
+
+        Without samples (unit scaling) there is no fit to judge: the feedback says so.
+        """
+        if not len(response.function_names):
+            note = (f'{scenario}/{request.n_vars}: no eq. 25 calibration (0 full-model '
+                    'samples; unit scaling, corrected along the run from its own full '
+                    'runs; coordinator calibration_samples, default config/'
+                    'simplified_models.yaml scaling.run_samples)')
+            goal_handle.publish_feedback(Optimise.Feedback(phase='calibration_fit',
+                                                           note=note))
+            self.get_logger().info(note)
+            return
         note = fit_note(scenario, request.n_vars, response.function_names,
                         response.r_squared, response.full_max, self.min_fit_r2)
         goal_handle.publish_feedback(Optimise.Feedback(phase='calibration_fit', note=note))

@@ -6,7 +6,10 @@ fetched over the graph from the simulation workers (found as the coordinator fin
 its own, :mod:`suspension_tuning.nodes._pool`: every worker takes pieces of the batch
 as it is free, and a lost or hung worker's pieces go to another); after each piece
 ``~/calibration_progress`` (CalibrationProgress) says how many of the samples are
-done, which the coordinator passes on in its action feedback.  The
+done, which the coordinator passes on in its action feedback.  A request with
+``unit_scaling`` spends no samples: the gradients then come from the unscaled
+simplified model (the coordinator's first-order correction maps them onto the full
+model along the run).  The
 scaling is cached in ``calibration_dir`` under a key of scenario, n_vars, samples, seed,
 a hash of the simplified models' configuration, the fingerprint of the workers'
 full model (:mod:`suspension_tuning.model_identity`) and, for a request's own ride road
@@ -76,7 +79,8 @@ class GradientEvaluatorNode(Node):
         directory = str(self.get_parameter('calibration_dir').value)
         self.calibration_dir = Path(directory or Path.home() / '.cache' / 'suspension_tuning'
                                     / 'calibration')
-        self.scalings: dict[tuple[str, int, str], Scaling] = {}
+        # None: unit scaling (a request's unit_scaling)
+        self.scalings: dict[tuple[str, int, str, str], Scaling | None] = {}
         self.simplified_runs = 0
         self.stopping = False  # set by destroy_node: a calibration stops waiting
         self.pool = pool_from_parameters(self, ReentrantCallbackGroup(), lambda: self.stopping)
@@ -117,6 +121,13 @@ class GradientEvaluatorNode(Node):
                     f'{fingerprint}: give both nodes the same sim_workers and '
                     'sim_worker_pattern')
             response.model_fingerprint = fingerprint
+            if request.unit_scaling:  # nothing to sample or cache
+                self.scalings[(scenario, n_vars, request.road, request.condition)] = None
+                response.success = True
+                response.wall_time_s = time.monotonic() - start
+                self.get_logger().info(f'{scenario}/{n_vars}: no calibration, unit scaling '
+                                       '(the caller corrects along its run)')
+                return response
             key = scaling_key(scenario, n_vars, n_samples, seed, fingerprint)
             if request.integrator:  # samples of a named integrator get their own cache
                 key['integrator'] = request.integrator
@@ -198,8 +209,9 @@ class GradientEvaluatorNode(Node):
         try:
             scenario, n_vars = self._check(request.scenario, request.n_vars)
             x = validate_design(np.asarray(request.x, dtype=float), n_vars)[0]
-            scaling = self.scalings.get((scenario, n_vars, request.road, request.condition))
-            if scaling is None:
+            case = (scenario, n_vars, request.road, request.condition)
+            scaling = self.scalings.get(case)
+            if case not in self.scalings:
                 road = f' on road {request.road!r}' if request.road else ''
                 if request.condition:
                     road += f' in condition {Condition.from_text(request.condition).name!r}'

@@ -109,6 +109,36 @@ def calibration_settings(n_samples: int | None = None, seed: int | None = None
             int(cfg['seed'] if seed is None else seed))
 
 
+def default_calibration_samples(scenario: str, n_vars: int) -> int:
+    """Eq. 25 samples a tuning run spends by default on a case: 0 = none (unit scaling).
+
+    config/simplified_models.yaml ``scaling.run_samples`` per scenario and number of
+    variables (chosen by measured paid full runs, docs/corrected_gradients.md); a case
+    it does not list takes ``scaling.n_samples``.
+    """
+    cfg = load_simplified_config()['scaling']
+    by_size = (cfg.get('run_samples') or {}).get(scenario) or {}
+    return int(by_size.get(int(n_vars), cfg['n_samples']))
+
+
+def run_calibration_samples(scenario: str, n_vars: int, requested: int | None = None) -> int:
+    """The eq. 25 samples of a run: ``requested``, or the case's default when it is
+    None or negative.
+
+    Raises
+    ------
+    ValueError
+        ``requested`` is 1 (eq. 25 needs two samples at least; 0 means none).
+    """  # noqa: D205
+    if requested is None or int(requested) < 0:
+        return default_calibration_samples(scenario, n_vars)
+    if int(requested) == 1:
+        raise ValueError('calibration_samples 1: eq. 25 needs at least 2 samples (0: no '
+                         'calibration, unit scaling; -1: the default of config/'
+                         'simplified_models.yaml scaling.run_samples)')
+    return int(requested)
+
+
 def calibration_designs(
     n_vars: int, n_samples: int | None = None, seed: int | None = None
 ) -> tuple[Array, int, int]:

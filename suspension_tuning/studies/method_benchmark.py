@@ -50,7 +50,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
+from suspension_tuning.optim.simplified_gradient import (
+    SimplifiedGradient,
+    calibrate,
+    default_calibration_samples,
+)
 from suspension_tuning.studies import common
 from suspension_tuning.studies.peers import PEER_BUDGET, PEERS
 from suspension_tuning.vehicle.scenarios import run_scenario
@@ -77,11 +81,19 @@ LHS_STARTS = 4
 #: Eq. 25 calibration samples (config/simplified_models.yaml scaling.n_samples), the
 #: reference search's.
 CALIBRATION_SAMPLES = 16
-#: Eq. 25 calibration samples of ours in the benchmark, by scenario (measured,
-#: docs/corrected_gradients.md): none on the ride (the first-order correction alone
-#: carries the gradients: the same optima, nothing dedicated to pay), 4 (corners) on
-#: handling (none lost 2 of 6 starts there, 4 solve all 6 in 3-5 runs).
-BENCH_CALIBRATION_SAMPLES = {'ride': 0, 'handling': 4}
+
+
+def bench_calibration_samples(scenario: str, n_vars: int) -> int:
+    """Eq. 25 calibration samples of ours in the benchmark: what a tuning run spends.
+
+    config/simplified_models.yaml ``scaling.run_samples`` (the coordinator's default;
+    measured, docs/corrected_gradients.md): none on the ride (the first-order
+    correction alone carries the gradients: the same optima, nothing dedicated to
+    pay), 4 on handling (none lost 2 of 6 starts there, 4 solve all 6 in 3-5 runs).
+    """
+    return default_calibration_samples(scenario, n_vars)
+
+
 #: Peers without a stop of their own: their runs always spend the budget, so their
 #: paid full runs are the budget when the answer is solved (their runs in the
 #: benchmark may stop at the first solved design, which the budget's answer equals or
@@ -783,7 +795,7 @@ def run_benchmark(scenario: str, n_vars: int, integrator: str, reference: Refere
                    for peer in peers for label, x0 in starts}
     slsqp_steps = {'slsqp': common.SLSQP_EPS} if slsqp_steps is None else slsqp_steps
     if calibration_samples is None:
-        calibration_samples = BENCH_CALIBRATION_SAMPLES[scenario]
+        calibration_samples = bench_calibration_samples(scenario, n_vars)
     judge = FixedStepJudge(scenario, n_vars)
     t0 = time.perf_counter()
     scaling = calibrate(scenario, n_vars, n_samples=calibration_samples,
