@@ -41,11 +41,8 @@ def test_in_process_run_switches_to_handling_for_the_lane_change_and_back(in_pro
 
 
 @pytest.mark.ros
-# The step-locked run (1,440 valve periods, one DDS round trip each) takes about 10 s
-# alone, but was seen to stall for a second at a time often enough on a machine loaded
-# by other work to pass 240 s: a slow run is reported by its duration, not failed
-# (pytest.ini: 300 s).
-@pytest.mark.timeout(660)
+# The step-locked run (1,440 valve periods, one DDS round trip each) takes about 2 s
+# (benchmarks/bench_closed_loop.py); bounded at 240 s (pytest.ini: 300 s a test).
 def test_closed_loop_over_topics_gives_the_in_process_bits(ros_context, executor,
                                                            in_process):
     from rclpy.executors import SingleThreadedExecutor
@@ -72,7 +69,7 @@ def test_closed_loop_over_topics_gives_the_in_process_bits(ros_context, executor
                                     actuals.append, RELIABLE)
     client = client_node.create_client(EvaluateDesign, '/full_vehicle_sim/evaluate')
     response = call_service(client, EvaluateDesign.Request(
-        scenario='mixed', n_vars=2, designs=DESIGN.ravel().tolist()), timeout_s=600.0)
+        scenario='mixed', n_vars=2, designs=DESIGN.ravel().tolist()), timeout_s=240.0)
     assert response.success, response.error
     np.testing.assert_array_equal(response.f, in_process.f)  # same bits as in-process
     np.testing.assert_array_equal(np.reshape(response.g, (1, 4)), in_process.g)

@@ -59,12 +59,11 @@ goal is cancelled); its request then fails as cancelled.
 from __future__ import annotations
 
 import sys
-import threading
 import time
 
 import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -110,6 +109,51 @@ MAX_DESIGNS_PER_REQUEST = 128
 PLAUSIBILITY_TIMEOUT_S = 120.0
 
 
+class ValveLink:
+    """The sim's end of the closed loop: ``/suspension/valve_state``, taken by the run.
+
+    A hidden node of its own (``_<name>_valve_link``, no parameters, no rosout) holds the
+    valve-state subscription, and an executor of its own that only the thread running
+    the mixed scenario spins while it waits for step k's answer: the answer is taken
+    and handed over on that thread, without the node's multi-threaded executor.  (A
+    subscription of the sim node itself is served on another thread of its pool; every
+    hand-over then waits for the GIL held by the integrating thread while the
+    executor's own thread keeps waking: measured, a 2-variable ride-length mixed run
+    took minutes instead of seconds.)  The topic is resolved by the sim node, so its
+    remappings apply; the link node takes no command-line arguments of its own (a
+    ``__node`` remap would give it the sim's name).
+    """
+
+    def __init__(self, node: Node) -> None:
+        topic = node.resolve_topic_name('/suspension/valve_state')
+        self.node = Node(f'_{node.get_name()}_valve_link', namespace=node.get_namespace(),
+                         context=node.context, use_global_arguments=False,
+                         enable_rosout=False, start_parameter_services=False)
+        self.answers: dict[int, tuple[int, int, int, int]] = {}
+        self.node.create_subscription(ValveState, topic, self._on_valve_state, RELIABLE)
+        self.executor = SingleThreadedExecutor(context=node.context)
+        self.executor.add_node(self.node)
+
+    def _on_valve_state(self, msg: ValveState) -> None:
+        self.answers[int(msg.step)] = (msg.front_spring, msg.front_damping,
+                                       msg.rear_spring, msg.rear_damping)
+
+    def wait_for(self, step: int, timeout_s: float) -> tuple[int, int, int, int] | None:
+        """The valve state answering ``step``, or None after ``timeout_s`` (s)."""
+        deadline = time.monotonic() + timeout_s
+        while step not in self.answers:
+            left = deadline - time.monotonic()
+            if left <= 0.0 or not self.node.context.ok():
+                return None
+            self.executor.spin_once(timeout_sec=left)
+        return self.answers[step]
+
+    def destroy(self) -> None:
+        """Remove the link node from the graph."""
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+
+
 class TopicValveController:
     """A mixed-scenario valve controller reached over topics, step-locked.
 
@@ -134,30 +178,31 @@ class TopicValveController:
                            steering_rate_radps=state['steering_rate_radps'],
                            strut_pressure_pa=list(state['strut_pressure_pa']))
         msg.header.stamp, msg.header.frame_id = sim_time, 'base_link'
-        # The answer comes on another thread of the node's executor (the valve state
-        # subscription's callback group).  A state without an answer within a second
-        # is published again (the controller's update is idempotent for a repeated step).
+        # A state without an answer within a second is published again (the
+        # controller's update is idempotent for a repeated step).
         deadline = time.monotonic() + self.timeout_s
-        with node.valve_news:
-            node.valve_answers.clear()
-            while True:
-                node.state_pub.publish(msg)
-                wait = min(1.0, deadline - time.monotonic())
-                if node.valve_news.wait_for(lambda: step in node.valve_answers, wait):
-                    return node.valve_answers[step]
-                if time.monotonic() >= deadline:
-                    raise RuntimeError(f'no valve state for step {step} within '
-                                       f'{self.timeout_s} s: is the valve_controller node '
-                                       'running?')
-                node.get_logger().warning(f'no valve state for step {step} yet: '
-                                          'publishing the vehicle state again')
+        node.valve_link.answers.clear()
+        while True:
+            node.state_pub.publish(msg)
+            answer = node.valve_link.wait_for(step, min(1.0, deadline - time.monotonic()))
+            if answer is not None:
+                return answer
+            if not node.context.ok():
+                raise RuntimeError(f'the node shut down while waiting for the valve state '
+                                   f'of step {step}')
+            if time.monotonic() >= deadline:
+                raise RuntimeError(f'no valve state for step {step} within '
+                                   f'{self.timeout_s} s: is the valve_controller node '
+                                   'running?')
+            node.get_logger().warning(f'no valve state for step {step} yet: '
+                                      'publishing the vehicle state again')
 
 
 class FullVehicleSimNode(Node):
     """Service adapter over :func:`suspension_tuning.evaluation.evaluate`.
 
-    Multi-threaded: a closed-loop run's evaluate callback waits for valve states,
-    which the subscription's callback group takes meanwhile.
+    Multi-threaded: ``~/cancel`` is served while an evaluate request runs.  A
+    closed-loop run takes its valve states on its own thread (:class:`ValveLink`).
     """
 
     EXECUTOR = MultiThreadedExecutor
@@ -218,10 +263,7 @@ class FullVehicleSimNode(Node):
         self.model_pub.publish(String(data=dump_yaml(self.model_description)))
         self.clock_pub = self.create_publisher(Clock, '/clock', 10)
         self.state_pub = self.create_publisher(VehicleState, '/vehicle/state', RELIABLE)
-        self.valve_answers: dict[int, tuple[int, int, int, int]] = {}
-        self.valve_news = threading.Condition()
-        self.create_subscription(ValveState, '/suspension/valve_state', self._on_valve_state,
-                                 RELIABLE, callback_group=MutuallyExclusiveCallbackGroup())
+        self.valve_link = ValveLink(self)
         self.evaluate_service = serve(self, EvaluateDesign, '~/evaluate', self._on_evaluate,
                                       MutuallyExclusiveCallbackGroup())
         # Its own group: taken while an evaluate request runs.
@@ -363,16 +405,12 @@ class FullVehicleSimNode(Node):
                else logger.error)
         log(f'FMU, design {message.design}, t = {message.time_s:.6g} s: {message}')
 
-    def _on_valve_state(self, msg: ValveState) -> None:
-        with self.valve_news:
-            self.valve_answers[int(msg.step)] = (msg.front_spring, msg.front_damping,
-                                                 msg.rear_spring, msg.rear_damping)
-            self.valve_news.notify_all()
-
     def destroy_node(self) -> None:
         """Close the FMU (if the worker runs one) too."""
         if self.fmu is not None:
             self.fmu.close()
+        if getattr(self, 'valve_link', None) is not None:
+            self.valve_link.destroy()
         super().destroy_node()
 
     def publish_telemetry(self, histories: dict[str, np.ndarray], index: int = 0) -> None:
