@@ -167,7 +167,14 @@ def main(argv: list[str] | None = None) -> None:
             raise
         end_rclpy()
         return  # SIGTERM while the nodes are made: a node on the shut-down context failed
-    graph = SpinningGraph(nodes)
+    try:
+        graph = SpinningGraph(nodes)
+    except KeyboardInterrupt:  # Ctrl-C while the executors start: no goal ran yet
+        settle_signal()
+        for node in reversed(nodes):
+            node.destroy_node()
+        end_rclpy()
+        return
     interrupted = False
     try:
         graph.wait()
