@@ -107,6 +107,10 @@ MAX_DESIGNS_PER_REQUEST = 128
 #: centre runs take longer gets its check cut short with a warning naming the
 #: parameter, and serves all the same (raise it for a slow FMU).
 PLAUSIBILITY_TIMEOUT_S = 120.0
+#: A gap between two looks at the clock (one a second) longer than this is a pause of
+#: the process (stopped, its host suspended), s: half Fast DDS's default participant
+#: lease (20 s), after which peers may have forgotten the process.
+PAUSE_WARNING_S = 10.0
 
 
 class ValveLink:
@@ -273,6 +277,9 @@ class FullVehicleSimNode(Node):
                     for name, kind in telemetry.TOPICS.items()}
         self.runs = 0
         self.evaluate_calls = 0
+        self._last_look = time.monotonic()
+        self.create_timer(1.0, self._watch_for_pause,
+                          callback_group=MutuallyExclusiveCallbackGroup())
 
     def _check_fmu_plausibility(self) -> None:
         """Log the FMU's start-up notes; run the plausibility check where it is due.
@@ -383,6 +390,19 @@ class FullVehicleSimNode(Node):
                              f'time (one valve controller node), got {len(designs)} designs')
         timeout = float(self.get_parameter('closed_loop_timeout_s').value)
         return [TopicValveController(self, timeout)]
+
+    def _watch_for_pause(self) -> None:
+        """Say so after a pause of the process: its pools may not find it again."""
+        now = time.monotonic()
+        gap, self._last_look = now - self._last_look, now
+        if gap > PAUSE_WARNING_S:
+            self.get_logger().warning(
+                f'this process was paused for {gap:.0f} s (stopped, or its host '
+                'suspended): the pools that use it (coordinator, gradient evaluator) take '
+                'it back once DDS finds it again, which Fast DDS may never do after a '
+                'pause longer than its participant lease (20 s; eProsima/Fast-DDS#155): '
+                f'if no "worker {self.get_fully_qualified_name()} is back" follows in '
+                "the coordinator's log within seconds, restart this worker")
 
     def _on_cancel(self, _request: Trigger.Request,
                    response: Trigger.Response) -> Trigger.Response:
