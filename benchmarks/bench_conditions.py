@@ -28,7 +28,7 @@ Figures:
 * ``conditions_speedup_2_workers``: wall time of evaluating designs in the 6 conditions
   with 1 worker process over that with 2 (``concurrent.futures`` processes, one numba
   thread each, the condition-runs shared as the pool shares a batch: ``--speedup-designs``
-  designs, default 6, each in every condition; the least of 3 timings).
+  of the 6 starts, default all 6, each in every condition; the least of 3 timings).
 
 The reference is in benchmarks/references.json (``condition_cases``:
 ``ride_4var_conditions_worst``),
@@ -188,8 +188,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--speedup-only', action='store_true',
                         help='only the 1- vs 2-worker timing')
     parser.add_argument('--speedup-designs', type=int, default=6,
-                        help='designs of the 1- vs 2-worker timing (each in every condition)')
+                        help='designs of the 1- vs 2-worker timing, 1-6: the first M '
+                             'starts, each in every condition')
     args = parser.parse_args(argv)
+    if not 1 <= args.speedup_designs <= 6:
+        parser.error(f'--speedup-designs takes 1 to 6 (the starts), got {args.speedup_designs}')
     os.environ.setdefault('NUMBA_NUM_THREADS', '1')
     from suspension_tuning.conditions import load_conditions
     from suspension_tuning.evaluation import in_process_condition_gradients
