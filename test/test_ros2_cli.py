@@ -4,7 +4,8 @@ ros2cli is not on PyPI; ``../shared/tools/ros2cli/install.sh`` (beside the clone
 in CI) installs the upstream sources (branch jazzy) into a directory of this module's
 own.  One ``graph --telemetry-rate 1.0`` (live telemetry) serves every test here, on the
 session's domain.  ``--no-daemon`` verbs discover the graph for ``--spin-time`` seconds:
-Fast DDS discovery on a loaded machine needs a few.
+Fast DDS discovery on a loaded machine needs a few (3 s was seen to miss
+the latched result topic and to leave a parameter call unanswered for 60 s).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ INSTALL = ROOT.parent / 'shared' / 'tools' / 'ros2cli' / 'install.sh'
 BIN = Path(sys.executable).parent
 NODES = ['/coordinator', '/full_vehicle_sim', '/gradient_evaluator', '/recorder',
          '/valve_controller']
-SPIN = ['--no-daemon', '--spin-time', '3']
+SPIN = ['--no-daemon', '--spin-time', '5']
 #: Live telemetry's rate factor here: the 30 s ride run (config/scenarios.yaml) in 10 s.
 RATE_FACTOR = 3.0
 #: Telemetry rate per topic at factor 1.0, Hz: histories at 250 Hz (config/vehicle.yaml
