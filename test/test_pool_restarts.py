@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from suspension_tuning.testing import wait_until
+
 pytestmark = pytest.mark.ros
 
 STAND_IN = Path(__file__).parent / 'fixtures' / 'stand_in_worker.py'
@@ -32,13 +34,6 @@ def start(name: str, log_dir: Path) -> subprocess.Popen:
     log = open(log_dir / f'{name}.log', 'a')  # noqa: SIM115 - closed with the process
     return subprocess.Popen([sys.executable, str(STAND_IN), name], stdout=log,
                             stderr=subprocess.STDOUT)
-
-
-def wait_until(predicate, timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not predicate():
-        assert time.monotonic() < deadline, what() if callable(what) else what
-        time.sleep(0.1)
 
 
 @pytest.fixture
@@ -54,7 +49,7 @@ def pool_and_workers(ros_context, executor, tmp_path):
     pool = SimulationPool(node, ReentrantCallbackGroup(), allow=['/sim_0', '/sim_1'],
                           design_timeout_s=5.0, refresh_s=0.2)
     try:
-        wait_until(lambda: pool.alive == ['/sim_0', '/sim_1'], 60.0, 'workers not up')
+        assert wait_until(lambda: pool.alive == ['/sim_0', '/sim_1'], 60.0), 'workers not up'
         yield pool, workers, tmp_path
     finally:
         for process in workers.values():
@@ -97,7 +92,7 @@ def test_a_worker_killed_and_restarted_at_once_is_taken_back_past_the_old_lease(
     workers['sim_1'].send_signal(signal.SIGKILL)
     workers['sim_1'].wait(timeout=10)
     workers['sim_1'] = start('sim_1', log_dir)
-    wait_until(lambda: _events(pool, 'back', killed_at), 30.0, list(pool.events))
+    assert wait_until(lambda: _events(pool, 'back', killed_at), 30.0), list(pool.events)
     # past the dead process's participant lease, when the graph forgets it
     time.sleep(max(0.0, killed_at + PARTICIPANT_LEASE_S + 3.0 - time.monotonic()))
     assert pool.alive == ['/sim_0', '/sim_1'], list(pool.events)
@@ -128,8 +123,8 @@ def test_a_worker_stopped_mid_batch_and_continued_is_taken_back(pool_and_workers
     time.sleep(max(0.0, stopped_at + stop_s - time.monotonic()))
     resumed_at = time.monotonic()
     workers['sim_1'].send_signal(signal.SIGCONT)
-    wait_until(lambda: _events(pool, 'back', resumed_at), 30.0, lambda: _state(pool))
+    assert wait_until(lambda: _events(pool, 'back', resumed_at), 30.0), _state(pool)
     # rediscovered by the graph, it answers a ping before it gets a piece
-    wait_until(lambda: pool.alive == ['/sim_0', '/sim_1'], 30.0, lambda: _state(pool))
+    assert wait_until(lambda: pool.alive == ['/sim_0', '/sim_1'], 30.0), _state(pool)
     assert _batch_designs_of_sim_1(pool) > 0, _state(pool)
     assert len(_events(pool, 'back', stopped_at)) == 1, _state(pool)
