@@ -39,6 +39,7 @@ class StandIn:
         self.context = stack.enter_context(isolated_context(self.domain_id))
         self.node = Node(name, namespace=namespace, context=self.context)
         self.delay_s, self.fingerprint, self.designs = delay_s, fingerprint, 0
+        self.paused = False  #: answer as a worker on its way to a new participant
         self.node.create_service(EvaluateDesign, '~/evaluate', self._evaluate)
         model = self.node.create_publisher(String, '~/model', model_qos(0.2))
         model.publish(String(data=yaml.safe_dump({'fingerprint': fingerprint})))
@@ -46,6 +47,11 @@ class StandIn:
 
     def _evaluate(self, request, response):
         response.model_fingerprint = self.fingerprint
+        if self.paused:  # as full_vehicle_sim after a pause (nodes/_pause.py)
+            from suspension_tuning.nodes._pause import PAUSED_ERROR
+
+            response.success, response.error = False, PAUSED_ERROR + f'{self.node.get_name()}'
+            return response
         if not request.scenario and not request.designs:  # a ping, as full_vehicle_sim
             response.success = True
             return response
@@ -134,6 +140,29 @@ def test_a_hung_worker_is_left_after_design_timeout_and_its_designs_go_elsewhere
         resent = [e for e in pool.events if e.kind == 'resent']
         assert resent and resent[0].worker == '/hung' and 'hung' in resent[0].text
         assert pool.alive == ['/healthy']
+
+
+def test_a_worker_answering_paused_gets_its_piece_sent_elsewhere_and_no_more_until_it_answers(
+        ros_context, executor):
+    with contextlib.ExitStack() as stack:
+        paused = StandIn(stack, 'paused', 0.01)
+        other = StandIn(stack, 'other', 0.01)
+        pool = make_pool(ros_context, executor)
+        wait_until(lambda: pool.alive == ['/other', '/paused'])
+        pool.check_models()
+        paused.paused = True
+        x = designs(8)
+        # its answer "paused" is no answer: the piece goes to the other worker, the
+        # batch's f is exact, and no error reaches the caller
+        np.testing.assert_array_equal(f_of(pool.evaluate('ride', 2, x)), x.sum(axis=1))
+        assert (paused.designs, other.designs) == (0, 8)
+        resent = [e for e in pool.events if e.kind == 'resent']
+        assert [e.worker for e in resent] == ['/paused'] and 'was paused' in resent[0].text
+        pool.revive()  # the next goal: pinged again, and "paused" is no answer either
+        time.sleep(2.0)  # pings at 0.5 s, 1 s and 2 s after the first
+        assert pool.alive == ['/other']
+        paused.paused = False  # its new participant answers
+        wait_until(lambda: pool.alive == ['/other', '/paused'], 10.0)
 
 
 def test_models_other_than_the_pools_are_left_out_or_refuse_when_listed(

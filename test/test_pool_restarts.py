@@ -7,7 +7,8 @@ is the coordinator's (:mod:`suspension_tuning.nodes._pool`).  The restart waits 
 dead process's DDS participant lease (Fast DDS: 20 s by default), when the graph
 forgets it, before the next batch; a stop lasts a few seconds (past the worker's
 liveliness lease) or past the participant lease, when DDS may not match the continued
-process again (the reason of that case's xfail).
+process again: the worker then joins the graph as a new participant
+(:mod:`suspension_tuning.nodes._pause`).
 """
 
 from __future__ import annotations
@@ -75,6 +76,20 @@ def _events(pool, kind: str, since: float) -> list:
             if e.kind == kind and e.worker == '/sim_1' and e.time_s >= since]
 
 
+def _stopped(pid: int) -> bool:
+    """Every thread of process ``pid`` stopped (state T in /proc).
+
+    A SIGSTOP stops a process once one of its threads takes the signal: on a loaded
+    machine the thread woken for it may wait for a core while another thread of the
+    process still answers a request.
+    """
+    def state(task: Path) -> str:
+        stat = (task / 'stat').read_text()
+        return stat[stat.rindex(')') + 2]  # the field after the command's name
+
+    return all(state(task) in 'Tt' for task in Path(f'/proc/{pid}/task').iterdir())
+
+
 def _batch_designs_of_sim_1(pool) -> int:
     """Designs sim_1 answers of one 12-design batch (checked against f = sum of x)."""
     before = pool.designs_by_worker()['/sim_1']
@@ -103,19 +118,13 @@ def test_a_worker_killed_and_restarted_at_once_is_taken_back_past_the_old_lease(
 
 @pytest.mark.parametrize('stop_s', [
     6.0,  # a debugger's break: past the worker's liveliness lease, within its DDS lease
-    pytest.param(PARTICIPANT_LEASE_S + 3.0, marks=pytest.mark.xfail(
-        strict=False, reason=(
-            'past the DDS participant lease the pool takes the worker back only when Fast '
-            'DDS rediscovers its endpoints: measured 2-3 of 12 runs beside three others on '
-            '2 cores where it never does (liveliness and evaluate unmatched for 150 s; new '
-            'endpoints of the worker did not help): the continued process reads the '
-            "pool's queued announcements and never learns it was forgotten "
-            '(eProsima/Fast-DDS#155)'))),
+    PARTICIPANT_LEASE_S + 3.0,  # a laptop's lid: past the lease, a new participant
 ], ids=['within_dds_lease', 'past_dds_lease'])
 def test_a_worker_stopped_mid_batch_and_continued_is_taken_back(pool_and_workers, stop_s):
-    pool, workers, _ = pool_and_workers
+    pool, workers, log_dir = pool_and_workers
     stopped_at = time.monotonic()
     workers['sim_1'].send_signal(signal.SIGSTOP)
+    assert wait_until(lambda: _stopped(workers['sim_1'].pid), 5.0), 'sim_1 not stopped'
     # A batch at once: sim_1 takes a piece and does not answer; its liveliness ends
     # within the lease, and the piece goes to sim_0 (f checked against sum of x).
     assert _batch_designs_of_sim_1(pool) == 0
@@ -128,3 +137,6 @@ def test_a_worker_stopped_mid_batch_and_continued_is_taken_back(pool_and_workers
     assert wait_until(lambda: pool.alive == ['/sim_0', '/sim_1'], 30.0), _state(pool)
     assert _batch_designs_of_sim_1(pool) > 0, _state(pool)
     assert len(_events(pool, 'back', stopped_at)) == 1, _state(pool)
+    said = (log_dir / 'sim_1.log').read_text()
+    # PAUSE_S (10 s) is the bound between the two cases: a new participant past it only
+    assert ('joins the graph again as a new DDS participant' in said) == (stop_s > 10.0), said

@@ -12,11 +12,13 @@ go out one at a time to whichever worker is free, the one idle longest first: a 
 host takes fewer pieces, and a one-design request does not always land on the same
 worker.  A piece whose worker is lost (liveliness), vanishes or stays silent longer
 than ``design_timeout_s`` per design is sent again to another worker; that worker is
-used again once it is back: its liveliness regained, a model description from a new
-process (one restarted under its name, also within the liveliness lease, when its loss
-was never reported), or an answer to a ping (a lost worker whose ``evaluate`` is
-matched is pinged: DDS may not report the liveliness of a process continued after a
-stop longer than its participant lease).  "back" is said once per return.  A design
+used again once it is back: it answers a ping after its liveliness returned, or it
+sends a model description from a new process (one restarted under its name, also
+within the liveliness lease, when its loss was never reported).  A lost worker whose
+``evaluate`` is matched is pinged too: DDS may not report the liveliness of a process
+continued after a stop longer than its participant lease; a worker started on its own
+joins again as a new participant then (:mod:`suspension_tuning.nodes._pause`), and the
+old one's answer "paused" is no answer.  "back" is said once per return.  A design
 gives the same bits alone or in a batch, so how the pieces fall does not change a
 result.
 
@@ -53,6 +55,7 @@ from std_srvs.srv import Trigger
 from suspension_tuning_interfaces.srv import EvaluateDesign
 
 from suspension_tuning.model_identity import ModelMismatchError, check_same
+from suspension_tuning.nodes._pause import PAUSED_ERROR
 from suspension_tuning.nodes._services import ServiceCallError
 
 #: The service type that makes a node a simulation worker.
@@ -248,9 +251,16 @@ class SimulationPool:
         future.add_done_callback(lambda done: self._on_pong(worker, done))
 
     def _on_pong(self, worker: Worker, future: Any) -> None:
+        """A ping's answer makes the worker ready (and back, when it was out).
+
+        An answer from a worker on its way to a new participant after a pause
+        (:data:`~suspension_tuning.nodes._pause.PAUSED_ERROR`) is not one: the ping is
+        sent again, and the new participant answers it.
+        """
         event = None
         with self._news:
-            if future is worker.ping and future.exception() is None:
+            if (future is worker.ping and future.exception() is None
+                    and not future.result().error.startswith(PAUSED_ERROR)):
                 worker.ready, worker.ping = True, None
                 worker.ping_wait_s = PING_RETRY_S[0]
                 event = self._back(worker, ' (it answers again)')
@@ -344,16 +354,16 @@ class SimulationPool:
         event = None
         with self._news:
             worker = self.workers[name]
-            if info.alive_count > 0:
-                event = self._back(worker, '') if worker.gone else None
+            if info.alive_count > 0:  # back once it answers a ping (_on_pong)
                 worker.alive = True
                 self._ping(worker)
             elif worker.alive and not self._in_this_process(name):
-                worker.alive, worker.gone = False, True
+                was_out, worker.alive, worker.gone = worker.gone, False, True
                 self._not_ready(worker)
-                event = ('lost', f'worker {name} lost: no sign of life within '
-                         f'{self.loss_timeout_s:g} s (its process ended or its host is '
-                         'unreachable)')
+                if not was_out:  # not when alive again for a moment, unanswered
+                    event = ('lost', f'worker {name} lost: no sign of life within '
+                             f'{self.loss_timeout_s:g} s (its process ended or its host '
+                             'is unreachable)')
             self._news.notify_all()
         if event is not None:
             self._event(*event, name)
@@ -615,6 +625,10 @@ class SimulationPool:
                     self._fail(worker, f'its call failed ({error})', index, n, queue)
                     continue
                 response = future.result()
+                if response.error.startswith(PAUSED_ERROR):  # not an answer: send again
+                    self._fail(worker, 'was paused and joins the graph again', index, n,
+                               queue)
+                    continue
                 if not response.success:
                     raise ValueError(response.error)
                 if self.fingerprint and response.model_fingerprint != self.fingerprint:

@@ -168,8 +168,8 @@ class SpinningGraph:
         finally:
             done.set()
 
-    def wait(self) -> None:
-        """Block until the executors stop or the nodes' context shuts down.
+    def wait(self, until: Callable[[], bool] | None = None) -> None:
+        """Block until the executors stop, the nodes' context shuts down or ``until()``.
 
         Ctrl-C raises KeyboardInterrupt here.  SIGTERM (and a Ctrl-C whose
         KeyboardInterrupt Python dropped in a ``__del__``) only shuts the context down:
@@ -186,10 +186,17 @@ class SpinningGraph:
         handler), so that every later join returns at once with the executor still
         spinning; the nodes were then destroyed under it, and the process aborted at
         exit ("terminate called without an active exception") as that thread woke.
+
+        Parameters
+        ----------
+        until : callable, optional
+            Looked at every 0.2 s: returns when it is true (a node asks to be made
+            again, :class:`~suspension_tuning.nodes._pause.PauseWatch`).
         """
         contexts = {executor.context for executor in self.executors}
         while not all(done.is_set() for done in self.spun):
-            if not all(context.ok() for context in contexts):
+            if not all(context.ok() for context in contexts) or (until is not None
+                                                                 and until()):
                 return
             next(done for done in self.spun if not done.is_set()).wait(0.2)
 
@@ -217,7 +224,8 @@ class SpinningGraph:
 
 
 def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
-             name: str | None = None, rename: bool = False) -> None:
+             name: str | None = None, rename: bool = False,
+             renew_after_pause: bool = False) -> None:
     """Initialise rclpy, spin one node until Ctrl-C or shutdown, then clean up.
 
     Parameters
@@ -234,6 +242,12 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
         the process says so in one line and exits with code 2.
     rename : bool
         The refusal also suggests another node name (a simulation worker).
+    renew_after_pause : bool
+        A node with a ``pause_watch`` (:class:`~suspension_tuning.nodes._pause.
+        PauseWatch`) is made again, in a new context (a new DDS participant), after a
+        pause of the process longer than the watch's bound: its peers then find it as
+        they find a process restarted under its name.  The pause's work in progress
+        ends first (the executor's shutdown waits for its callbacks, up to 10 s).
 
     A parameter value the node cannot use (:class:`~suspension_tuning.nodes._parameters.
     ParameterError`) or a configuration file it cannot use (:class:`~suspension_tuning.
@@ -251,29 +265,41 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
     rclpy.init(args=args)
     if name is not None and not require_unique(name, start_check(name, [name]), rename):
         return  # Ctrl-C or SIGTERM during the check
-    try:
-        node = make_node()
-    except (ParameterError, ConfigError) as error:
-        rclpy.try_shutdown()
-        print(f'{name or "node"}: not started: {error}', file=sys.stderr)
-        sys.exit(2)
-    except KeyboardInterrupt:  # Ctrl-C while the node is made
-        settle_signal()
-        end_rclpy()
-        return
-    except Exception:
-        if rclpy.ok():
-            raise
-        end_rclpy()  # SIGTERM while the node is made: it failed on the shut-down context
-        return
-    # The node spins in a thread of its own, the main thread waits for Ctrl-C or for the
-    # context to shut down (SIGTERM), as in ``graph`` (SpinningGraph has why).
-    spinning = SpinningGraph([node])
-    interrupted = False
-    try:
-        spinning.wait()
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        spinning.shutdown(interrupted)
-        end_rclpy()
+    while True:
+        try:
+            node = make_node()
+        except (ParameterError, ConfigError) as error:
+            rclpy.try_shutdown()
+            print(f'{name or "node"}: not started: {error}', file=sys.stderr)
+            sys.exit(2)
+        except KeyboardInterrupt:  # Ctrl-C while the node is made
+            settle_signal()
+            end_rclpy()
+            return
+        except Exception:
+            if rclpy.ok():
+                raise
+            end_rclpy()  # SIGTERM while the node is made: it failed on the shut-down context
+            return
+        watch = getattr(node, 'pause_watch', None) if renew_after_pause else None
+        if watch is not None:
+            watch.renew = True
+        # The node spins in a thread of its own, the main thread waits for Ctrl-C or for
+        # the context to shut down (SIGTERM), as in ``graph`` (SpinningGraph has why).
+        spinning = SpinningGraph([node])
+        interrupted = renewing = False
+        try:
+            spinning.wait(until=None if watch is None else watch.renewal_due.is_set)
+            renewing = watch is not None and watch.renewal_due.is_set() and rclpy.ok()
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            spinning.shutdown(interrupted)
+            end_rclpy()  # the participant goes: its peers are told it left
+        if not renewing:
+            return
+        try:
+            rclpy.init(args=args)  # a new default context: a new participant, same name
+        except KeyboardInterrupt:  # Ctrl-C between the two contexts
+            end_rclpy()
+            return

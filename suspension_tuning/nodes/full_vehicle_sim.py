@@ -31,7 +31,9 @@ so the run is step-locked and deterministic (parameter ``valve_controller``: 'ro
 or 'inprocess' for the same controller without topics).
 
 Several workers run as ``--ros-args -r __node:=sim_0`` etc.; each serves its own
-``/<name>/evaluate``.
+``/<name>/evaluate``.  A worker started on its own whose process was paused for more than
+10 s (stopped, its host suspended) makes its node again as a new DDS participant, so
+that the pools find it again (:mod:`suspension_tuning.nodes._pause`).
 
 Parameter ``model``: 'builtin' (default) or 'fmu', a user's full vehicle model as an
 FMI co-simulation FMU (``fmu_path``, ``fmu_mapping``: docs/fmu.md), checked at
@@ -79,6 +81,7 @@ from suspension_tuning.fmu.fmi_log import FmuMessage
 from suspension_tuning.fmu.isolated import DEFAULT_TIMEOUT_S, FmuRunCancelledError
 from suspension_tuning.model_identity import builtin_description, summary_line
 from suspension_tuning.nodes._parameters import ParameterError, declare_numbers, read_only
+from suspension_tuning.nodes._pause import PauseWatch
 from suspension_tuning.nodes._pool import model_qos
 from suspension_tuning.nodes._services import serve
 from suspension_tuning.nodes._spin import run_node
@@ -107,10 +110,6 @@ MAX_DESIGNS_PER_REQUEST = 128
 #: centre runs take longer gets its check cut short with a warning naming the
 #: parameter, and serves all the same (raise it for a slow FMU).
 PLAUSIBILITY_TIMEOUT_S = 120.0
-#: A gap between two looks at the clock (one a second) longer than this is a pause of
-#: the process (stopped, its host suspended), s: half Fast DDS's default participant
-#: lease (20 s), after which peers may have forgotten the process.
-PAUSE_WARNING_S = 10.0
 
 
 class ValveLink:
@@ -277,9 +276,9 @@ class FullVehicleSimNode(Node):
                     for name, kind in telemetry.TOPICS.items()}
         self.runs = 0
         self.evaluate_calls = 0
-        self._last_look = time.monotonic()
-        self.create_timer(1.0, self._watch_for_pause,
-                          callback_group=MutuallyExclusiveCallbackGroup())
+        # A pause of the process is logged; a worker started on its own (main) then
+        # joins the graph again as a new DDS participant (nodes/_pause.py has why).
+        self.pause_watch = PauseWatch(self)
 
     def _check_fmu_plausibility(self) -> None:
         """Log the FMU's start-up notes; run the plausibility check where it is due.
@@ -322,6 +321,9 @@ class FullVehicleSimNode(Node):
                      response: EvaluateDesign.Response) -> EvaluateDesign.Response:
         start = time.monotonic()
         response.model_fingerprint = self.model_fingerprint
+        if self.pause_watch.paused():  # an old participant, matched again for a moment
+            response.success, response.error = False, self.pause_watch.paused_error()
+            return response
         if not request.scenario and not request.designs:  # a pool's ping
             response.success = True
             return response
@@ -391,19 +393,6 @@ class FullVehicleSimNode(Node):
         timeout = float(self.get_parameter('closed_loop_timeout_s').value)
         return [TopicValveController(self, timeout)]
 
-    def _watch_for_pause(self) -> None:
-        """Say so after a pause of the process: its pools may not find it again."""
-        now = time.monotonic()
-        gap, self._last_look = now - self._last_look, now
-        if gap > PAUSE_WARNING_S:
-            self.get_logger().warning(
-                f'this process was paused for {gap:.0f} s (stopped, or its host '
-                'suspended): the pools that use it (coordinator, gradient evaluator) take '
-                'it back once DDS finds it again, which Fast DDS may never do after a '
-                'pause longer than its participant lease (20 s; eProsima/Fast-DDS#155): '
-                f'if no "worker {self.get_fully_qualified_name()} is back" follows in '
-                "the coordinator's log within seconds, restart this worker")
-
     def _on_cancel(self, _request: Trigger.Request,
                    response: Trigger.Response) -> Trigger.Response:
         if self.fmu is None or not hasattr(self.fmu, 'cancel'):
@@ -471,7 +460,8 @@ class FullVehicleSimNode(Node):
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run suspension_tuning full_vehicle_sim``."""
     try:
-        run_node(FullVehicleSimNode, args, name='full_vehicle_sim', rename=True)
+        run_node(FullVehicleSimNode, args, name='full_vehicle_sim', rename=True,
+                 renew_after_pause=True)
     except (FmuConfigError, MappingError) as error:  # ParameterError, ConfigError: run_node
         import rclpy
         rclpy.try_shutdown()
