@@ -22,6 +22,7 @@ out (one line naming the file, the condition and the key, exit status 2)::
 
     tune --scenario ride --n-vars 4 --conditions config/conditions.yaml
     tune --scenario ride --conditions my_set.yaml --condition-form mean
+    tune --scenario ride --conditions my_set.yaml --constraint 'ride:a_rms_driver_mps2<=1.0'
 
 One recorded full-model run of a design instead of an optimisation (any scenario; in
 'mixed' the valves switch closed-loop), e.g. for a bag to look at in Foxglove::
@@ -606,10 +607,14 @@ def main(argv: list[str] | None = None) -> int:
             from suspension_tuning.conditions import load_conditions
 
             conditions = load_conditions(args.conditions).as_text()
-            if args.scenario != 'ride' or args.evaluate or constraints or road:
+            if args.scenario != 'ride' or args.evaluate or road:
                 raise ValueError('--conditions: a condition set is for the ride optimisation '
-                                 '(no --evaluate, --constraint or --road: each condition '
-                                 'names its road)')
+                                 '(no --evaluate or --road: each condition names its road)')
+            other = [c.label for c in constraints if c.scenario != 'ride']
+            if other:
+                raise ValueError(f'--constraint {other[0]}: with --conditions a constraint '
+                                 'bounds a ride quantity, which then holds in every '
+                                 "condition (e.g. 'ride:a_rms_driver_mps2<=1.0')")
         x0 = start_point(args.start, args.n_vars) if args.start else args.x0
         if args.n_vars is None:
             args.n_vars = (start_size([t.partition('=')[0].strip() for t in args.start], None,

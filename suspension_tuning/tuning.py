@@ -297,9 +297,10 @@ class TuningRequest:
     conditions : str
         A set of operating conditions (:mod:`suspension_tuning.conditions`): a condition
         file's path, or the set as JSON text (:meth:`ConditionSet.as_text`); '' = the
-        single condition of config/scenarios.yaml.  Ride only, without extra
-        constraints or a goal road (each condition names its road).  Checked here;
-        parsed into ``condition_set``.  Optimised by :func:`optimise_conditions`.
+        single condition of config/scenarios.yaml.  Ride only, without a goal road
+        (each condition names its road); extra constraints bound ride quantities, each
+        in every condition.  Checked here; parsed into ``condition_set``.  Optimised by
+        :func:`optimise_conditions`.
     condition_form : str
         'worst' (min-max in epigraph form; the default for '') or 'mean' (weighted).
     """
@@ -346,9 +347,12 @@ class TuningRequest:
             if self.scenario != 'ride':
                 raise ValueError('operating conditions are for the ride scenario, not '
                                  f'{self.scenario!r}')
-            if self.constraints:
-                raise ValueError('extra constraints do not combine with a condition set '
-                                 '(the tyre-hop constraints hold in every condition)')
+            other = [c.label for c in self.constraints if c.scenario != 'ride']
+            if other:
+                raise ValueError(
+                    f'constraint {other[0]}: with a condition set, a constraint bounds a '
+                    "ride quantity (e.g. 'ride:a_rms_driver_mps2<=1.0'), which then holds "
+                    'in every condition; the conditions are ride conditions')
             if self.road:
                 raise ValueError('a goal road does not combine with a condition set: each '
                                  'condition names its road')
@@ -941,6 +945,30 @@ class _ConditionTerms:
         return self.values[key]
 
 
+def condition_constraint_values(specs: Sequence[ConstraintSpec], f_c: ArrayLike,
+                                g_c: ArrayLike, metrics: Sequence[Mapping[str, float]]
+                                ) -> Array:
+    """Each extra ride constraint's quantity in each condition, (S, C), its units.
+
+    ``f_c`` (C,), ``g_c`` (C, 4) and ``metrics`` (one dict per condition) are a
+    design's full runs in the conditions (:class:`_ConditionTerms`).
+    """
+    f_c, g_c = np.asarray(f_c, float), np.asarray(g_c, float).reshape(len(metrics), -1)
+    rows = []
+    for spec in specs:
+        if spec.quantity == 'f':
+            rows.append(f_c)
+        elif spec.quantity in TYRE_HOP_NAMES:
+            rows.append(g_c[:, TYRE_HOP_NAMES.index(spec.quantity)])
+        else:
+            missing = [c for c, values in enumerate(metrics) if spec.quantity not in values]
+            if missing:
+                raise ValueError(f'constraint {spec.label}: the ride full model returned no '
+                                 f'metric {spec.quantity!r}')
+            rows.append(np.array([float(values[spec.quantity]) for values in metrics]))
+    return np.asarray(rows, float).reshape(len(specs), len(metrics))
+
+
 def optimise_conditions(request: TuningRequest, model: ConditionModel,
                         gradients: Mapping[str, SimplifiedGradient] | None = None,
                         callback: Callable[[dict[str, Any], RunCounter], bool | None]
@@ -952,12 +980,17 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
     the worst of them (form 'worst'), posed in epigraph form for Dynamic-Q: one extra
     variable t, minimise t subject to ``f_c(x) - t <= 0`` for every condition c, so
     that the subproblems stay smooth (a max of functions has kinks where two cross).
-    The eq. 11 tyre-hop constraints hold in every condition (4 per condition).
+    The eq. 11 tyre-hop constraints hold in every condition (4 per condition), and so
+    does each extra constraint (``request.constraints``, ride quantities): one row
+    ``value_c - bound`` per constraint and condition, after the tyre-hop rows.  An
+    extra constraint on the objective or a tyre-hop constraint takes its gradient from
+    the condition's (corrected) simplified gradient; one on a metric from central
+    differences of the full model in every condition (one batch of 2n designs x C).
 
     Parameters
     ----------
     request : TuningRequest
-        The ride scenario with ``conditions`` set; no extra constraints.
+        The ride scenario with ``conditions`` set.
     model : callable
         ``(designs (m, n), conditions) -> [FullEvaluation per condition]``: the full
         model of every design in every condition; the m x C runs of one call may go out
@@ -983,7 +1016,9 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
         ``condition_names``, ``condition_form``, ``condition_f_best`` (C,),
         ``condition_g_best`` (C, 4), ``condition_metrics_best`` (one dict per condition)
         and ``worst_condition`` (the condition with the largest f at the reported
-        design).  Full runs count condition-runs (a design in C conditions is C runs);
+        design).  ``constraint_values`` (and ``_best``) hold each extra constraint's
+        largest value over the conditions; ``condition_constraint_values_best`` all of
+        them, (S, C).  Full runs count condition-runs (a design in C conditions is C runs);
         ``rounds`` counts the batches of full runs (one per evaluated design, 2n per
         full-model gradient: the wall time with C workers).
     """
@@ -1015,7 +1050,13 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
         start = np.r_[x0, float(np.max(f0))]
     options = DynamicQOptions.from_mapping(request.options).as_dict()
     gtol = float(options['gtol'])
-    staircase = ([False] * n_c if worst else []) + [True] * (4 * n_c)
+    specs = list(request.constraints)
+    bounds = np.array([spec.upper_bound for spec in specs], float).reshape(-1, 1)
+    # per extra constraint: from the simplified gradient, or full central differences
+    by_simplified = [request.gradient_source == 'simplified' and spec.has_simplified_model
+                     for spec in specs]
+    staircase = (([False] * n_c if worst else []) + [True] * (4 * n_c)
+                 + [spec.quantity in TYRE_HOP_NAMES for spec in specs for _ in range(n_c)])
     opt = DynamicQ(start, lower, upper, options, gradient_source=request.gradient_source,
                    surrogate_rule_constraints=lambda m: staircase[:m] + [True] * (
                        m - len(staircase)))
@@ -1028,23 +1069,36 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
     def problem_values(z: Array) -> tuple[float, Array]:
         x = z[:n]
         known = np.asarray(x, float).tobytes() in terms.values
-        f_c, g_c, _ = terms.at(x)
+        f_c, g_c, metrics = terms.at(x)
         rounds[0] += 0 if known else 1
-        g_hop = g_c.reshape(-1)
+        g_all = np.r_[g_c.reshape(-1), extra_g(f_c, g_c, metrics)]
         if worst:
-            return float(z[n]), np.r_[f_c - z[n], g_hop]
-        return float(np.dot(weights, f_c)), g_hop
+            return float(z[n]), np.r_[f_c - z[n], g_all]
+        return float(np.dot(weights, f_c)), g_all
+
+    def extra_g(f_c: Array, g_c: Array, metrics: list[dict[str, float]]) -> Array:
+        """value - bound of every extra constraint in every condition (constraint-major)."""
+        if not specs:
+            return np.zeros(0)
+        return (condition_constraint_values(specs, f_c, g_c, metrics) - bounds).reshape(-1)
+
+    def full_jacobian(x: Array) -> Array:
+        """Central differences of f (C), g (4 C) and the extra rows (S C): one batch."""
+        def values(points: Array) -> Array:
+            f, g, metrics = terms.batch(points)
+            rounds[0] += 1
+            return np.column_stack([f, g.reshape(len(points), -1), np.array(
+                [extra_g(f[i], g[i], metrics[i]) for i in range(len(points))]
+            ).reshape(len(points), -1)])
+
+        return central_difference(values, x, request.fd_step, lower[:n], upper[:n])
 
     def problem_gradient(z: Array) -> tuple[Array, Array]:
         x = z[:n]
         if request.gradient_source == 'full':
-            def values(points: Array) -> Array:
-                f, g, _ = terms.batch(points)
-                rounds[0] += 1
-                return np.column_stack([f, g.reshape(len(points), -1)])
-
-            jac = central_difference(values, x, request.fd_step, lower[:n], upper[:n])
-            df_c, dg_c = jac[:n_c], jac[n_c:].reshape(n_c, -1, n)
+            jac = full_jacobian(x)
+            df_c, dg_c = jac[:n_c], jac[n_c:5 * n_c].reshape(n_c, -1, n)
+            d_extra = jac[5 * n_c:]
         else:
             f_c, g_c, _ = terms.at(x)
             rows_f, rows_g = [], []
@@ -1063,13 +1117,20 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
                 rows_f.append(jac[0])
                 rows_g.append(jac[1:])
             df_c, dg_c = np.asarray(rows_f), np.asarray(rows_g)
-        dg_hop = dg_c.reshape(-1, n)
+            d_extra = np.zeros((len(specs) * n_c, n))
+            if specs and not all(by_simplified):
+                d_extra = full_jacobian(x)[5 * n_c:]
+            for k, spec in enumerate(specs):
+                if by_simplified[k]:
+                    d_extra[k * n_c:(k + 1) * n_c] = [
+                        spec.derivative(df_c[c], dg_c[c]) for c in range(n_c)]
+        dg_rows = np.vstack([dg_c.reshape(-1, n), d_extra])
         if worst:
             df = np.r_[np.zeros(n), 1.0]
             dg = np.vstack([np.column_stack([df_c, -np.ones(n_c)]),
-                            np.column_stack([dg_hop, np.zeros(len(dg_hop))])])
+                            np.column_stack([dg_rows, np.zeros(len(dg_rows))])])
             return df, dg
-        return weights @ df_c, dg_hop
+        return weights @ df_c, dg_rows
 
     while (ask := opt.ask()) is not None:
         kind, z = ask
@@ -1088,11 +1149,11 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
             continue
         x = np.asarray(record['x'], float)[:n]
         f_c, g_c, metrics = terms.at(x)
-        g_hop = g_c.reshape(-1)
+        g_all = np.r_[g_c.reshape(-1), extra_g(f_c, g_c, metrics)]
         out = {'iteration': int(record['iteration']), 'x': x,
                'f': combined_objective(f_c, weights, request.condition_form),
-               'g': g_hop, 'rho': record['rho'], 'rho_next': record['rho_next'],
-               'max_violation': float(max(0.0, np.max(g_hop))),
+               'g': g_all, 'rho': record['rho'], 'rho_next': record['rho_next'],
+               'max_violation': float(max(0.0, np.max(g_all))),
                'condition_f': f_c.tolist(), 'condition_metrics': metrics}
         if worst:
             out['epigraph_t'] = float(record['x'][n])
@@ -1101,10 +1162,22 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
             opt.stop('cancelled')
             cancelled = True
             break
+    def worst_values(x: Array) -> tuple[list[float], Array]:
+        """Each extra constraint's largest value over the conditions, and all (S, C)."""
+        key = np.asarray(x, float)[:n].tobytes()
+        if not specs or key not in terms.values:  # no run of x: nothing to say
+            return [], np.zeros((0, n_c))
+        values = condition_constraint_values(specs, *terms.values[key])
+        return values.max(axis=1).tolist(), values
+
     result = opt.result()
+    last = np.asarray(result.x, float)[:n]
     result.update(counter.as_dict(), scenario=request.scenario, n_vars=n,
-                  gradient_source=request.gradient_source, constraints=[],
-                  constraint_values=[], constraint_gradient_sources=[],
+                  gradient_source=request.gradient_source,
+                  constraints=[spec.as_dict() for spec in specs],
+                  constraint_values=worst_values(last)[0],
+                  constraint_gradient_sources=['simplified' if simplified else 'full'
+                                               for simplified in by_simplified],
                   condition_names=conditions.names, condition_form=request.condition_form,
                   conditions=conditions.as_dict(), history=records, rounds=rounds[0],
                   x=np.asarray(result.x, float)[:n], cancelled=cancelled,
@@ -1118,7 +1191,9 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
         result.update(x_best=np.asarray(rec['x'], float), f_best=float(rec['f']),
                       g_best=np.asarray(rec['g'], float), best_iteration=rec['iteration'],
                       best_feasible=feasible, max_violation_best=rec['max_violation'],
-                      constraint_values_best=[], condition_f_best=f_c.tolist(),
+                      constraint_values_best=worst_values(rec['x'])[0],
+                      condition_constraint_values_best=worst_values(rec['x'])[1].tolist(),
+                      condition_f_best=f_c.tolist(),
                       condition_g_best=g_c.tolist(), condition_metrics_best=metrics,
                       worst_condition=conditions.names[int(np.argmax(f_c))])
     return result

@@ -166,3 +166,67 @@ def test_the_weighted_mean_form_finds_the_weighted_centre(monkeypatch):
     centre = 0.25 * CENTRES['a'] + 0.75 * CENTRES['b']
     assert result.x_best == pytest.approx(centre, abs=2e-3)
     assert result.worst_condition == 'a'  # farther from the weighted centre
+
+
+OFFSET = {'a': 0.0, 'b': 0.1}  # the 'metric' of the constraint test: x_1 + offset_c
+
+
+def _bowl_model_with_metric(designs, conditions):
+    """The bowls, with a_rms_driver_mps2 = x_1 + OFFSET[c] standing for a ride metric."""
+    out = _bowl_model(designs, conditions)
+    for condition, run in zip(conditions, out):
+        run.metric_names = ['a_rms_driver_mps2']
+        run.metrics = (np.atleast_2d(designs)[:, 0] + OFFSET[condition.name])[:, None]
+    return out
+
+
+def test_an_extra_constraint_on_a_metric_holds_in_every_condition(monkeypatch):
+    conditions = _bowl_set()
+    monkeypatch.setattr(ConditionSet, 'from_text', staticmethod(lambda text: conditions))
+    request = TuningRequest('ride', 2, gradient_source='full', conditions='set',
+                            condition_form='worst', options={'maxiter': 40},
+                            constraints=['ride:a_rms_driver_mps2<=0.4'])
+    result = optimise_conditions(request, _bowl_model_with_metric)
+    # x_1 + 0.1 <= 0.4 binds in condition b: x_1 = 0.3; then b's bowl is the worse one
+    # everywhere near, so x_2 sits at b's centre 0.5 and f = (0.8 - 0.3)^2 = 0.25
+    assert result.best_feasible
+    assert result.x_best == pytest.approx([0.3, 0.5], abs=2e-3)
+    assert result.f_best == pytest.approx(0.25, rel=1e-2)
+    # the largest value over the conditions is the reported one; each condition's too
+    assert result.constraint_values_best == pytest.approx([0.4], abs=2e-3)
+    np.testing.assert_allclose(result.condition_constraint_values_best, [[0.3, 0.4]],
+                               atol=2e-3)
+    assert result.constraint_gradient_sources == ['full']
+    # g: 4 tyre-hop rows per condition, then one row per condition of the constraint
+    assert len(result.g_best) == 4 * 2 + 2
+
+
+def test_an_extra_constraint_on_the_objective_takes_the_simplified_gradient(monkeypatch):
+    conditions = _bowl_set(weight_b=3.0)
+    monkeypatch.setattr(ConditionSet, 'from_text', staticmethod(lambda text: conditions))
+
+    def exact(name):  # the bowls' own gradient stands in for a scaled simplified one
+        return lambda x, _inputs: (2.0 * (np.asarray(x) - CENTRES[name]), np.zeros((4, 2)),
+                                   None)
+
+    request = TuningRequest('ride', 2, gradient_source='simplified', conditions='set',
+                            condition_form='mean', options={'maxiter': 40},
+                            constraints=['ride:f_ride<=0.16'])
+    result = optimise_conditions(request, _bowl_model,
+                                 {name: exact(name) for name in ('a', 'b')})
+    # the weighted centre (0.65, 0.45) has f_a = 0.225 > 0.16: the answer lies on the
+    # circle |x - a| = 0.4, on the line from a to b: a + 0.4 (b - a) / |b - a|
+    unit = (CENTRES['b'] - CENTRES['a']) / np.linalg.norm(CENTRES['b'] - CENTRES['a'])
+    expected = CENTRES['a'] + 0.4 * unit
+    assert result.best_feasible
+    assert result.x_best == pytest.approx(expected, abs=3e-3)
+    assert result.condition_f_best[0] == pytest.approx(0.16, abs=1e-3)
+    assert result.constraint_gradient_sources == ['simplified']
+    assert result.n_simplified_runs > 0 and result.n_full_runs % 2 == 0
+
+
+def test_a_constraint_on_another_scenario_is_refused_with_a_condition_set(monkeypatch):
+    monkeypatch.setattr(ConditionSet, 'from_text', staticmethod(lambda text: _bowl_set()))
+    with pytest.raises(ValueError, match=r"constraint handling:f_hand<=0\.8: with a "
+                                         r"condition set, a constraint bounds a ride"):
+        TuningRequest('ride', 2, conditions='set', constraints=['handling:f_hand<=0.8'])

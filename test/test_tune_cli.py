@@ -495,3 +495,16 @@ def test_tune_refuses_a_bad_condition_set_naming_file_condition_and_key(tmp_path
     assert capsys.readouterr().err.strip() == (
         f"error: {path}: condition 'autobahn': speed_kmh: 200 km/h is above the vehicle's "
         'top speed 132 km/h (config/vehicle.yaml longitudinal.top_speed_kmh)')
+
+
+def test_tune_refuses_a_handling_constraint_with_a_condition_set(capsys):
+    from suspension_tuning.paths import config_dir
+    from suspension_tuning.tune import main
+
+    # the shipped set's conditions are ride conditions: a ride quantity may be bounded
+    # in every one of them, a handling one has no condition to hold in
+    assert main(['--conditions', str(config_dir() / 'conditions.yaml'),
+                 '--constraint', 'handling:f_hand<=0.8']) == 2
+    err = capsys.readouterr().err
+    assert '--constraint handling:f_hand<=0.8: with --conditions a constraint bounds a ride' \
+        ' quantity, which then holds in every condition' in err
