@@ -1,11 +1,13 @@
 """Operating conditions: the speeds, payloads and roads one tuning covers (no rclpy).
 
 A *condition set* (config/conditions.yaml, or a file ``tune --conditions FILE`` names)
-lists operating points of the ride scenario.  Each condition has a name, a speed, a
-payload (its mass and the longitudinal position of its centre of gravity), a road and
-a weight.  The optimisation (:func:`suspension_tuning.tuning.optimise_conditions`)
-runs the full model in every condition at each design and minimises the weighted mean
-of the per-condition objectives or the worst of them.
+lists operating points.  Each condition has a name, a speed, a payload (its mass and
+the longitudinal position of its centre of gravity), a road, a manoeuvre speed and a
+weight: the ride runs at the speed on the road, the handling lane change at the
+manoeuvre speed (default config/scenarios.yaml's, 65 km/h), both with the payload.  The
+optimisation (:func:`suspension_tuning.tuning.optimise_conditions`) runs the full model
+of the goal's scenario in every condition at each design and minimises the weighted
+mean of the per-condition objectives or the worst of them.
 
 The payload is a point mass on the body (sprung mass) at the height
 config/vehicle.yaml ``payload.cg_height_m``.  :func:`with_payload` moves the sprung
@@ -45,7 +47,9 @@ CONDITION_FORMS = ('worst', 'mean')
 #: The default condition set.
 DEFAULT_FILE = 'conditions.yaml'
 #: Keys of one condition in a file.
-CONDITION_KEYS = ('name', 'speed_kmh', 'payload', 'road', 'weight')
+CONDITION_KEYS = ('name', 'speed_kmh', 'payload', 'road', 'manoeuvre_speed_kmh', 'weight')
+#: Scenarios a condition set is for.
+CONDITION_SCENARIOS = ('ride', 'handling')
 PAYLOAD_KEYS = ('mass_kg', 'behind_front_axle_m')
 
 
@@ -55,7 +59,7 @@ class ConditionError(ValueError):
 
 @dataclass(frozen=True)
 class Condition:
-    """One operating point of the ride scenario.
+    """One operating point (ride: speed, payload, road; handling: manoeuvre speed, payload).
 
     Attributes
     ----------
@@ -72,6 +76,9 @@ class Condition:
         '' = the one config/scenarios.yaml names.
     weight : float
         Weight in the weighted mean (>= 0).
+    manoeuvre_speed_kmh : float
+        Speed of the handling scenario's double lane change [km/h]; 0 = the one
+        config/scenarios.yaml names (``handling.speed_kmh``).
     """
 
     name: str
@@ -80,14 +87,18 @@ class Condition:
     payload_behind_front_axle_m: float = 0.0
     road: str = ''
     weight: float = 1.0
+    manoeuvre_speed_kmh: float = 0.0
 
     def as_dict(self) -> dict[str, Any]:
         """The condition as a file writes it (run configurations, JSON)."""
         payload: dict[str, float] = {'mass_kg': self.payload_kg}
         if self.payload_kg > 0.0:
             payload['behind_front_axle_m'] = self.payload_behind_front_axle_m
-        return {'name': self.name, 'speed_kmh': self.speed_kmh, 'payload': payload,
-                'road': self.road, 'weight': self.weight}
+        out = {'name': self.name, 'speed_kmh': self.speed_kmh, 'payload': payload,
+               'road': self.road, 'weight': self.weight}
+        if self.manoeuvre_speed_kmh > 0.0:  # only when set: older texts stay the same
+            out['manoeuvre_speed_kmh'] = self.manoeuvre_speed_kmh
+        return out
 
     def as_text(self) -> str:
         """The condition as one JSON line (how a service request carries it)."""
@@ -235,10 +246,12 @@ def condition_scenarios(condition: Condition | None,
                         config: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """config/scenarios.yaml with the condition's ride speed, road and run length.
 
-    The run covers the configured averaging distance at the condition's speed: the
-    settling time stays (the W_b filter's, in seconds), the averaging time is the
+    The ride run covers the configured averaging distance at the condition's speed:
+    the settling time stays (the W_b filter's, in seconds), the averaging time is the
     configured one times configured speed / condition speed, so each condition averages
-    over the same stretch of road.
+    over the same stretch of road.  The handling scenario's lane change runs at the
+    condition's manoeuvre speed, when it names one (the run is laid out in metres: its
+    duration follows).
     """
     config = copy.deepcopy(dict(config) if config is not None else load_scenarios_config())
     if condition is None:
@@ -250,6 +263,8 @@ def condition_scenarios(condition: Condition | None,
     ride['duration_s'] = settle + (duration - settle) * speed0 / float(condition.speed_kmh)
     if condition.road:
         ride['road'] = condition.road
+    if condition.manoeuvre_speed_kmh > 0.0:
+        config['handling']['speed_kmh'] = float(condition.manoeuvre_speed_kmh)
     return config
 
 
@@ -287,6 +302,14 @@ def check_condition(condition: Condition, where: str = '',
             f"{head}: payload.behind_front_axle_m: {condition.payload_behind_front_axle_m:g} m "
             f'is outside the load space {lo:g}-{hi:g} m behind the front axle '
             '(config/vehicle.yaml payload)')
+    manoeuvre = condition.manoeuvre_speed_kmh
+    if not (math.isfinite(manoeuvre) and manoeuvre >= 0.0):
+        raise ConditionError(f'{head}: manoeuvre_speed_kmh: must be positive, got {manoeuvre}')
+    if manoeuvre > limits['top_speed_kmh']:
+        raise ConditionError(
+            f"{head}: manoeuvre_speed_kmh: {manoeuvre:g} km/h is above the vehicle's top "
+            f"speed {limits['top_speed_kmh']:g} km/h (config/vehicle.yaml "
+            'longitudinal.top_speed_kmh)')
     if not (math.isfinite(condition.weight) and condition.weight >= 0.0):
         raise ConditionError(f'{head}: weight: must be a number >= 0, got {condition.weight}')
     if condition.road:
@@ -358,7 +381,13 @@ def parse_condition(item: Any, where: str, limits: Mapping[str, float], k: int =
     if not isinstance(road, str):
         road = json.dumps(road)  # an entry of its own, as YAML (flow) mapping text
     weight = _number(item.get('weight', 1.0), f'{head}: weight')
-    condition = Condition(name, speed, mass, position, road, weight)
+    manoeuvre = 0.0
+    if item.get('manoeuvre_speed_kmh') is not None:
+        manoeuvre = _number(item['manoeuvre_speed_kmh'], f'{head}: manoeuvre_speed_kmh')
+        if not manoeuvre > 0.0:
+            raise ConditionError(f'{head}: manoeuvre_speed_kmh: must be positive, got '
+                                 f'{manoeuvre:g}')
+    condition = Condition(name, speed, mass, position, road, weight, manoeuvre)
     check_condition(condition, where, limits, road_length, lengths)
     return condition
 

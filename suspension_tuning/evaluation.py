@@ -121,7 +121,8 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
     condition : str
         An operating condition as text (:meth:`suspension_tuning.conditions.Condition.
         as_text`): the ride at its speed, with its payload, on its road (before
-        ``road``); '' = none.  Ride only.
+        ``road``), the handling lane change at its manoeuvre speed with its payload;
+        '' = none.  Ride and handling.
     **kwargs
         Passed to :func:`suspension_tuning.vehicle.scenarios.run_scenario` (or
         :func:`~suspension_tuning.vehicle.mixed.run_mixed`): ``params``, ``space`` (the
@@ -132,13 +133,15 @@ def evaluate(scenario: str, designs: Array, controllers: list | None = None,
         kwargs['params'] = with_integrator(params, integrator)
     if condition:
         from suspension_tuning.conditions import (
+            CONDITION_SCENARIOS,
             Condition,
             condition_params,
             condition_scenarios,
         )
 
-        if scenario != 'ride':
-            raise ValueError(f'operating conditions are for the ride scenario, not {scenario!r}')
+        if scenario not in CONDITION_SCENARIOS:
+            raise ValueError(f'operating conditions are for the ride and handling scenarios, '
+                             f'not {scenario!r}')
         parsed = Condition.from_text(condition)
         kwargs['params'] = condition_params(parsed, kwargs.get('params'))
         kwargs['config'] = condition_scenarios(parsed, kwargs.get('config'))
@@ -179,16 +182,22 @@ def in_process_model(scenario: str, integrator: str | None = None,
     return run
 
 
-def in_process_condition_model(integrator: str | None = None) -> Callable[[Array, Any], list]:
-    """The built-in full model over conditions, in-process (one design-batch per condition)."""
+def in_process_condition_model(integrator: str | None = None, scenario: str = 'ride'
+                               ) -> Callable[[Array, Any], list]:
+    """The built-in full model over conditions, in-process (one design-batch per condition).
+
+    ``scenario``: 'ride' or 'handling'; the scenario result is the simplified model's
+    inputs (``FullEvaluation.inputs``, those of the first design).
+    """
     from suspension_tuning.tuning import FullEvaluation
 
     def run(designs: Array, conditions: Sequence[Any]) -> list[FullEvaluation]:
         out = []
         for condition in conditions:
-            result = evaluate('ride', np.atleast_2d(np.asarray(designs, float)),
+            result = evaluate(scenario, np.atleast_2d(np.asarray(designs, float)),
                               integrator=integrator or None, condition=condition.as_text())
-            out.append(FullEvaluation(f=result.f, g=result.g, metric_names=result.metric_names,
+            out.append(FullEvaluation(f=result.f, g=result.g, inputs=result.result,
+                                      metric_names=result.metric_names,
                                       metrics=result.metrics))
         return out
 
@@ -197,7 +206,8 @@ def in_process_condition_model(integrator: str | None = None) -> Callable[[Array
 
 def in_process_condition_gradients(conditions: Any, n_vars: int,
                                    cache_dir: str | None = None,
-                                   n_samples: int | None = None) -> dict[str, Any]:
+                                   n_samples: int | None = None,
+                                   scenario: str = 'ride') -> dict[str, Any]:
     """The scaled simplified gradient of every condition, each calibrated in it.
 
     One eq. 25 calibration per condition (N full runs in that condition, config/
@@ -228,10 +238,10 @@ def in_process_condition_gradients(conditions: Any, n_vars: int,
     out: dict[str, Any] = {}
     for condition in getattr(conditions, 'conditions', conditions):
         text = condition.as_text()
-        key = scaling_key('ride', n_vars, n_samples, seed)
+        key = scaling_key(scenario, n_vars, n_samples, seed)
         key['condition'] = text
         digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
-        path = directory / f'condition_ride_{n_vars}var_{digest}.json'
+        path = directory / f'condition_{scenario}_{n_vars}var_{digest}.json'
         scaling, runs = None, 0
         if path.exists():
             try:
@@ -239,11 +249,11 @@ def in_process_condition_gradients(conditions: Any, n_vars: int,
             except ValueError:
                 scaling = None
         if scaling is None:
-            scaling = calibrate('ride', n_vars, n_samples, seed, condition=text)
+            scaling = calibrate(scenario, n_vars, n_samples, seed, condition=text)
             runs = n_samples
             path.parent.mkdir(parents=True, exist_ok=True)
             scaling.save(path)
-        gradient = SimplifiedGradient('ride', n_vars, scaling, condition=text)
+        gradient = SimplifiedGradient(scenario, n_vars, scaling, condition=text)
         gradient.calibration_runs = runs
         out[condition.name] = gradient
     return out

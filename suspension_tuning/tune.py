@@ -16,13 +16,15 @@ repeat it (a warning in the workers' log names the period that introduces)::
     tune --scenario ride --road belgian_block_measured
     tune --scenario ride --road ~/tracks/gerotek_belgian.crg
 
-The ride over a set of operating conditions (speeds, payloads, roads; docs/conditions.md),
+The ride or handling over a set of operating conditions (speeds, payloads, roads,
+manoeuvre speeds; docs/conditions.md),
 the worst case (default) or the weighted mean; the file is checked before the goal goes
 out (one line naming the file, the condition and the key, exit status 2)::
 
     tune --scenario ride --n-vars 4 --conditions config/conditions.yaml
     tune --scenario ride --conditions my_set.yaml --condition-form mean
     tune --scenario ride --conditions my_set.yaml --constraint 'ride:a_rms_driver_mps2<=1.0'
+    tune --scenario handling --n-vars 4 --conditions config/conditions_handling.yaml
 
 One recorded full-model run of a design instead of an optimisation (any scenario; in
 'mixed' the valves switch closed-loop), e.g. for a bag to look at in Foxglove::
@@ -88,7 +90,7 @@ from suspension_tuning.nodes._spin import wait_future
 from suspension_tuning.nodes._unique import POLL_S, discovery_window_s
 from suspension_tuning.physical_metrics import metric_lines
 from suspension_tuning.reported_design import statement
-from suspension_tuning.tuning import ConstraintSpec
+from suspension_tuning.tuning import OBJECTIVE_NAMES, ConstraintSpec
 from suspension_tuning.vehicle.design import DesignSpace, load_design_space
 
 
@@ -185,8 +187,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--repeat-road', action='store_true',
                         help='repeat a road file shorter than the run (a periodic excitation)')
     parser.add_argument('--conditions', default='', metavar='FILE',
-                        help='ride over the operating conditions of FILE (e.g. '
-                        'config/conditions.yaml): speeds, payloads, roads (docs/conditions.md)')
+                        help='optimise over the operating conditions of FILE (e.g. '
+                        'config/conditions.yaml): speeds, payloads, roads, manoeuvre speeds '
+                        '(docs/conditions.md)')
     parser.add_argument('--condition-form', default='worst', choices=('worst', 'mean'),
                         help='over the conditions: the worst case (min-max) or the '
                         'weighted mean (default: worst)')
@@ -607,14 +610,16 @@ def main(argv: list[str] | None = None) -> int:
             from suspension_tuning.conditions import load_conditions
 
             conditions = load_conditions(args.conditions).as_text()
-            if args.scenario != 'ride' or args.evaluate or road:
-                raise ValueError('--conditions: a condition set is for the ride optimisation '
-                                 '(no --evaluate or --road: each condition names its road)')
-            other = [c.label for c in constraints if c.scenario != 'ride']
+            if args.scenario not in ('ride', 'handling') or args.evaluate or road:
+                raise ValueError('--conditions: a condition set is for the ride or handling '
+                                 'optimisation (no --evaluate or --road: each condition names '
+                                 'its road)')
+            other = [c.label for c in constraints if c.scenario != args.scenario]
             if other:
                 raise ValueError(f'--constraint {other[0]}: with --conditions a constraint '
-                                 'bounds a ride quantity, which then holds in every '
-                                 "condition (e.g. 'ride:a_rms_driver_mps2<=1.0')")
+                                 f'bounds a {args.scenario} quantity, which then holds in every '
+                                 f"condition (e.g. '{args.scenario}:"
+                                 f"{OBJECTIVE_NAMES[args.scenario]}<=0.5')")
         x0 = start_point(args.start, args.n_vars) if args.start else args.x0
         if args.n_vars is None:
             args.n_vars = (start_size([t.partition('=')[0].strip() for t in args.start], None,

@@ -297,10 +297,10 @@ class TuningRequest:
     conditions : str
         A set of operating conditions (:mod:`suspension_tuning.conditions`): a condition
         file's path, or the set as JSON text (:meth:`ConditionSet.as_text`); '' = the
-        single condition of config/scenarios.yaml.  Ride only, without a goal road
-        (each condition names its road); extra constraints bound ride quantities, each
-        in every condition.  Checked here; parsed into ``condition_set``.  Optimised by
-        :func:`optimise_conditions`.
+        single condition of config/scenarios.yaml.  Ride or handling, without a goal
+        road (each condition names its road); extra constraints bound quantities of the
+        goal's scenario, each in every condition.  Checked here; parsed into
+        ``condition_set``.  Optimised by :func:`optimise_conditions`.
     condition_form : str
         'worst' (min-max in epigraph form; the default for '') or 'mean' (weighted).
     """
@@ -344,15 +344,18 @@ class TuningRequest:
             from suspension_tuning.conditions import ConditionSet, check_form
 
             object.__setattr__(self, 'condition_form', check_form(self.condition_form))
-            if self.scenario != 'ride':
-                raise ValueError('operating conditions are for the ride scenario, not '
-                                 f'{self.scenario!r}')
-            other = [c.label for c in self.constraints if c.scenario != 'ride']
+            from suspension_tuning.conditions import CONDITION_SCENARIOS
+
+            if self.scenario not in CONDITION_SCENARIOS:
+                raise ValueError('operating conditions are for the ride and handling '
+                                 f'scenarios, not {self.scenario!r}')
+            other = [c.label for c in self.constraints if c.scenario != self.scenario]
             if other:
                 raise ValueError(
                     f'constraint {other[0]}: with a condition set, a constraint bounds a '
-                    "ride quantity (e.g. 'ride:a_rms_driver_mps2<=1.0'), which then holds "
-                    'in every condition; the conditions are ride conditions')
+                    f'{self.scenario} quantity (the goal\'s scenario, e.g. '
+                    f"'{self.scenario}:{OBJECTIVE_NAMES[self.scenario]}<=0.5'), which then "
+                    'holds in every condition')
             if self.road:
                 raise ValueError('a goal road does not combine with a condition set: each '
                                  'condition names its road')
@@ -923,12 +926,16 @@ class _ConditionTerms:
         self.counter = counter
         #: x's bytes -> (f_c (C,), g_c (C, 4), metrics per condition)
         self.values: dict[bytes, tuple[Array, Array, list[dict[str, float]]]] = {}
+        #: x's bytes -> the simplified models' inputs of x's run in each condition
+        self.inputs: dict[bytes, list[Any]] = {}
 
     def batch(self, points: Array) -> tuple[Array, Array, list[list[dict[str, float]]]]:
         """f (m, C), g (m, C, k) and metrics [m][C] of designs, one batch of m x C runs."""
         points = np.atleast_2d(np.asarray(points, float))
         runs = self.model(points, self.conditions)
         self.counter.full_runs += len(points) * len(self.conditions)
+        if len(points) == 1:  # one design: its runs' inputs (handling's simplified model)
+            self.inputs[points[0].tobytes()] = [r.inputs for r in runs]
         f = np.column_stack([np.asarray(r.f, float) for r in runs])
         g = np.stack([np.asarray(r.g, float).reshape(len(points), -1) for r in runs], axis=1)
         metrics = [[{str(k): float(v) for k, v in zip(r.metric_names, np.asarray(r.metrics)[i])}
@@ -943,6 +950,11 @@ class _ConditionTerms:
             f, g, metrics = self.batch(np.asarray(x, float)[None, :])
             self.values[key] = (f[0], g[0], metrics[0])
         return self.values[key]
+
+    def inputs_at(self, x: Array) -> list[Any]:
+        """The simplified models' inputs of x's run in each condition (None each: none)."""
+        self.at(x)
+        return self.inputs.get(np.asarray(x, float).tobytes(), [None] * len(self.conditions))
 
 
 def condition_constraint_values(specs: Sequence[ConstraintSpec], f_c: ArrayLike,
@@ -990,7 +1002,7 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
     Parameters
     ----------
     request : TuningRequest
-        The ride scenario with ``conditions`` set.
+        The ride or handling scenario with ``conditions`` set.
     model : callable
         ``(designs (m, n), conditions) -> [FullEvaluation per condition]``: the full
         model of every design in every condition; the m x C runs of one call may go out
@@ -1101,9 +1113,10 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
             d_extra = jac[5 * n_c:]
         else:
             f_c, g_c, _ = terms.at(x)
+            inputs = terms.inputs_at(x)
             rows_f, rows_g = [], []
             for c, condition in enumerate(conditions.conditions):
-                df, dg, *rest = gradients[condition.name](x, None)
+                df, dg, *rest = gradients[condition.name](x, inputs[c])
                 values = np.asarray(rest[0], float) if rest and rest[0] is not None else None
                 counter.simplified_runs += 2 * n + (values is not None)
                 jac = np.vstack([np.asarray(df, float), np.asarray(dg, float)])

@@ -61,12 +61,13 @@ def test_a_three_condition_goal_reports_every_condition_in_the_result_and_the_ba
     from suspension_tuning.bag.reader import decode, read_messages
     from suspension_tuning.conditions import ConditionSet, load_conditions
     from suspension_tuning.inspect_bag import _format, summary, write_plots
-    from suspension_tuning.nodes._conditions import CONDITION_METRICS
+    from suspension_tuning.nodes._conditions import CONDITION_METRICS as BY_SCENARIO
     from suspension_tuning.nodes.recorder import RecorderNode
     from suspension_tuning.physical_metrics import physical_metrics
     from suspension_tuning.tune import format_result
     from suspension_tuning.vehicle.design import load_design_space
 
+    CONDITION_METRICS = BY_SCENARIO['ride']
     nodes, client_node = graph
     shipped = load_conditions()
     conditions = ConditionSet(tuple(c for name in NAMES for c in shipped.conditions
@@ -165,3 +166,36 @@ def test_a_constraint_on_a_ride_metric_holds_in_every_condition_of_a_goal(graph)
     assert len(result.g) == 4 * 2 + 2
     # feasible means every row within the ride's gtol (config/optimiser.yaml, 1e-3)
     assert result.feasible == (max(result.g) <= 1e-3)
+
+
+def test_a_handling_goal_over_two_conditions_reports_each_at_its_manoeuvre_speed(graph):
+    from suspension_tuning_interfaces.action import Optimise
+
+    from suspension_tuning import evaluation
+    from suspension_tuning.conditions import ConditionSet, load_conditions
+    from suspension_tuning.nodes._conditions import CONDITION_METRICS
+    from suspension_tuning.paths import config_dir
+    from suspension_tuning.physical_metrics import physical_metrics
+
+    _, client_node = graph
+    shipped = load_conditions(config_dir() / 'conditions_handling.yaml')
+    conditions = ConditionSet(tuple(c for c in shipped.conditions
+                                    if c.name in ('unladen_50', 'laden_65')), 'test')
+    result = _run(client_node, Optimise.Goal(
+        scenario='handling', n_vars=2, gradient_source='simplified', max_iterations=2,
+        conditions=conditions.as_text(), condition_form='worst'))
+    assert len(result.x) == 2, result.message
+    assert result.n_calibration_runs == 2 * SAMPLES  # each condition calibrated in it
+    shown = CONDITION_METRICS['handling']
+    assert list(result.condition_metric_names) == shown
+    k = len(shown)
+    # each condition's lane change at its own speed with its payload, in-process: the
+    # same bits as the workers' runs
+    for c, condition in enumerate(conditions.conditions):
+        run = evaluation.evaluate('handling', np.asarray(result.x)[None, :],
+                                  condition=condition.as_text())
+        assert result.condition_f[c] == run.f[0]
+        metrics = physical_metrics('handling', run.metric_names, run.metrics[0])
+        assert list(result.condition_metrics[c * k:(c + 1) * k]) == pytest.approx(
+            [metrics[name] for name in shown], rel=1e-12)
+    assert result.worst_condition == 'laden_65'  # more roll, laden and faster

@@ -39,21 +39,28 @@ from suspension_tuning.tuning import (
 )
 from suspension_tuning.vehicle.design import load_design_space
 
-#: The physical metrics shown per condition (the ride's, units in the names).
-CONDITION_METRICS = [shown for _, shown, _ in SHOWN['ride']]
+#: The physical metrics shown per condition, per scenario (units in the names).
+CONDITION_METRICS = {scenario: [shown for _, shown, _ in SHOWN[scenario]]
+                     for scenario in ('ride', 'handling')}
 
 
 def condition_model(node: Any, request: TuningRequest):
-    """Designs (m, n) in every condition, one batch over the pool (condition-major)."""
+    """Designs (m, n) in every condition, one batch over the pool (condition-major).
+
+    A handling run of one design brings the simplified model's inputs of each
+    condition's run (``FullEvaluation.inputs``, a TimeHistories message).
+    """
 
     def run(designs: np.ndarray, conditions: Sequence[Any]) -> list[FullEvaluation]:
         designs = np.atleast_2d(np.asarray(designs, float))
         m = len(designs)
         texts = [c.as_text() for c in conditions]
+        inputs = (request.scenario == 'handling' and m == 1
+                  and request.gradient_source == 'simplified')
         try:
             responses = node.pool.evaluate(
-                'ride', request.n_vars, np.vstack([designs] * len(texts)),
-                integrator=request.integrator,
+                request.scenario, request.n_vars, np.vstack([designs] * len(texts)),
+                integrator=request.integrator, return_inputs=inputs,
                 conditions=[text for text in texts for _ in range(m)])
         except (ValueError, ServiceCallError) as error:
             if node._cancel_requested():
@@ -65,7 +72,10 @@ def condition_model(node: Any, request: TuningRequest):
         metrics = np.concatenate([np.asarray(r.metrics, float).reshape(
             r.n_designs, len(r.metric_names)) for r in responses])
         names = list(responses[0].metric_names)
+        # one design: each condition's run is a piece (a response) of its own, in order
+        first = [r.inputs[0] if inputs and len(r.inputs) else None for r in responses]
         return [FullEvaluation(f=f[c * m:(c + 1) * m], g=g[c * m:(c + 1) * m],
+                               inputs=first[c] if inputs else None,
                                metric_names=names, metrics=metrics[c * m:(c + 1) * m])
                 for c in range(len(texts))]
 
@@ -76,11 +86,12 @@ def condition_gradient(node: Any, request: TuningRequest, condition: Any):
     """The scaled simplified gradient in one condition, from the gradient evaluator."""
     text = condition.as_text()
 
-    def gradient(x: np.ndarray, _inputs: Any) -> tuple[np.ndarray, np.ndarray, Any]:
+    def gradient(x: np.ndarray, inputs: Any) -> tuple[np.ndarray, np.ndarray, Any]:
         try:
             response = call(node, node.gradient_client, EvaluateGradient.Request(
-                scenario='ride', n_vars=request.n_vars, x=np.asarray(x, float).tolist(),
-                step=request.fd_step, inputs=TimeHistories(), condition=text),
+                scenario=request.scenario, n_vars=request.n_vars,
+                x=np.asarray(x, float).tolist(), step=request.fd_step,
+                inputs=TimeHistories() if inputs is None else inputs, condition=text),
                 node.timeout_s, node._stopped)
         except ServiceCallError as error:
             if node._cancel_requested():
@@ -97,13 +108,13 @@ def condition_gradient(node: Any, request: TuningRequest, condition: Any):
 
 def calibrate_condition(node: Any, goal_handle: Any, request: TuningRequest,
                         condition: Any) -> int:
-    """Calibrate the simplified ride model in one condition; the full runs it spent."""
+    """Calibrate the goal's simplified model in one condition; the full runs it spent."""
     samples = run_calibration_samples(
-        'ride', request.n_vars, int(node.get_parameter('calibration_samples').value))
-    node._calibrating = (goal_handle, 'ride', request.n_vars)
+        request.scenario, request.n_vars, int(node.get_parameter('calibration_samples').value))
+    node._calibrating = (goal_handle, request.scenario, request.n_vars)
     try:
         response = call(node, node.calibrate_client, Calibrate.Request(
-            scenario='ride', n_vars=request.n_vars, n_samples=samples,
+            scenario=request.scenario, n_vars=request.n_vars, n_samples=samples,
             unit_scaling=samples == 0, force=False,
             integrator=request.integrator, model_fingerprint=node.pool.fingerprint,
             condition=condition.as_text()), node.timeout_s * 2, node._stopped)
@@ -112,20 +123,22 @@ def calibrate_condition(node: Any, goal_handle: Any, request: TuningRequest,
     if not response.success:
         raise ValueError(f'calibration in condition {condition.name!r} failed: '
                          f'{response.error}')
-    node._check_fit(goal_handle, request, f'ride ({condition.name})', response)
+    node._check_fit(goal_handle, request, f'{request.scenario} ({condition.name})', response)
     return int(response.n_full_runs)
 
 
 def condition_fields(message: Any, result: Any, conditions: Any,
-                     baseline: tuple[np.ndarray, list[dict[str, float]]] | None) -> None:
+                     baseline: tuple[np.ndarray, list[dict[str, float]]] | None,
+                     scenario: str = 'ride') -> None:
     """Per-condition fields of a result: objectives, metrics, worst condition, rounds."""
+    shown = CONDITION_METRICS[scenario]
     message.condition_names = list(conditions.names)
-    message.condition_metric_names = list(CONDITION_METRICS)
+    message.condition_metric_names = list(shown)
     message.n_rounds = int(result.get('rounds', 0))
 
     def table(per_condition: Sequence[dict[str, float]]) -> list[float]:
-        rows = [physical_metrics('ride', (), values) for values in per_condition]
-        return [float(row.get(name, math.nan)) for row in rows for name in CONDITION_METRICS]
+        rows = [physical_metrics(scenario, (), values) for values in per_condition]
+        return [float(row.get(name, math.nan)) for row in rows for name in shown]
 
     if 'condition_f_best' in result:
         message.condition_f = [float(v) for v in result.condition_f_best]
@@ -161,7 +174,8 @@ def run_condition_goal(node: Any, goal_handle: Any, request: TuningRequest,
         return goal_handle.is_cancel_requested
 
     model = condition_model(node, request)
-    node.get_logger().info(f'optimising the ride over {len(conditions)} conditions '
+    node.get_logger().info(f'optimising the {request.scenario} over {len(conditions)} '
+                           'conditions '
                            f'({", ".join(conditions.names)}), {request.condition_form} case, '
                            f'{request.n_vars} variables, {request.gradient_source} gradients, '
                            f'model {fingerprint}')
@@ -201,12 +215,12 @@ def run_condition_goal(node: Any, goal_handle: Any, request: TuningRequest,
             message.baseline_physical_values = list(physical_settings(x_base).values())
         except (ValueError, ServiceCallError, RunCancelled) as error:
             node.get_logger().warning(f'run of the baseline design failed: {error}')
-    condition_fields(message, result, conditions, baseline)
+    condition_fields(message, result, conditions, baseline, request.scenario)
     if ('x_best' in result and node.get_parameter('final_telemetry').value
             and not goal_handle.is_cancel_requested):
         worst = conditions.conditions[conditions.names.index(str(result.worst_condition))]
         try:  # the reported design's telemetry in its worst condition, for the bag
-            node.pool.evaluate('ride', request.n_vars,
+            node.pool.evaluate(request.scenario, request.n_vars,
                                np.asarray(result.x_best, float)[None, :],
                                publish_telemetry=True, integrator=request.integrator,
                                conditions=[worst.as_text()])

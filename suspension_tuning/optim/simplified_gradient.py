@@ -74,7 +74,7 @@ def simplified_values(
     design) or 'count' (eq. 11 as the full model counts it).  Scaled by eq. 25 when
     ``scaling`` is given.  ``road``: the ride road in place of the configured one.
     ``space``: the design space (default config/design_space.yaml).  ``condition``: an
-    operating condition as text (its speed, payload and road; ride only).
+    operating condition as text (its speed, payload and road; handling: its payload).
     """
     inp = as_simplified_inputs(scenario, inputs)
     out = run_simplified(scenario, x, n_vars, inp, road, space, condition)
@@ -176,7 +176,7 @@ def fit_calibration(
     with the scaling (the caller has it already: it names the cache file).  ``road``:
     the ride road of the full-model samples, which the pitch-plane model drives too.
     ``space``: the design space (default config/design_space.yaml).  ``condition``: the
-    operating condition of the samples as text (ride), which the simplified model runs in.
+    operating condition of the samples as text, which the simplified model runs in.
     """
     full = np.column_stack([np.asarray(full_f, dtype=float), np.asarray(full_g, dtype=float)])
     if scenario == 'ride':
@@ -222,7 +222,7 @@ def calibrate(
         The design space of the simplified models (default config/design_space.yaml;
         ``run_full`` must use the same).
     condition : str, optional
-        Ride: an operating condition as text
+        An operating condition as text
         (:meth:`suspension_tuning.conditions.Condition.as_text`); the default
         ``run_full`` runs in it, the simplified model too, and the key holds it.
 
@@ -304,7 +304,7 @@ class SimplifiedGradient:
     space : DesignSpace, optional
         The design space (default config/design_space.yaml).
     condition : str, optional
-        Ride: an operating condition as text (its speed, payload and road); '' = none.
+        An operating condition as text (its speed, payload and road); '' = none.
 
     Notes
     -----
@@ -334,8 +334,8 @@ class SimplifiedGradient:
         self.scenario = scenario
         self.road = str(road)
         self.condition = str(condition)
-        if self.condition and scenario != 'ride':
-            raise ValueError('operating conditions are for the ride scenario')
+        if self.condition and scenario not in ('ride', 'handling'):
+            raise ValueError('operating conditions are for the ride and handling scenarios')
         self.n_vars = int(n_vars)
         self.scaling = scaling
         self.space = space

@@ -109,10 +109,19 @@ def pitch_plane_model(road: str = '', condition: str = '') -> PitchPlaneModel:
     return PitchPlaneModel(params, RideSetup.from_scenario_config(params, scenarios))
 
 
-@functools.lru_cache(maxsize=2)
-def handling_model() -> HandlingModel:
-    """The default handling model (config files), built once per process."""
-    return HandlingModel()
+@functools.lru_cache(maxsize=16)
+def handling_model(condition: str = '') -> HandlingModel:
+    """The handling model (config files), built once per process and condition.
+
+    ``condition``: an operating condition as text (:func:`pitch_plane_model`): its
+    payload (mass, centre of gravity, inertias); its manoeuvre speed reaches the model
+    through the full run's inputs.  '' = none.
+    """
+    if not condition:
+        return HandlingModel()
+    from suspension_tuning.conditions import Condition, condition_params
+
+    return HandlingModel(condition_params(Condition.from_text(condition)))
 
 
 def run_simplified(
@@ -138,7 +147,8 @@ def run_simplified(
     space : DesignSpace, optional
         The design space (default config/design_space.yaml).
     condition : str
-        Ride only: an operating condition as text (:func:`pitch_plane_model`).
+        An operating condition as text (:func:`pitch_plane_model`,
+        :func:`handling_model`).
 
     Returns
     -------
@@ -155,4 +165,4 @@ def run_simplified(
         raise ValueError('the handling model needs SimplifiedInputs from a full handling run')
     if inputs.scenario != 'handling':
         raise ValueError(f'inputs are for scenario {inputs.scenario!r}, not handling')
-    return handling_model().evaluate(x, n_vars, inputs.handling, space)
+    return handling_model(condition).evaluate(x, n_vars, inputs.handling, space)
