@@ -59,15 +59,23 @@ def load_check_settings(path: str | Path | None = None) -> CheckSettings:
 def check_design(scenario: str, n_vars: int, x: ArrayLike,
                  settings: CheckSettings | None = None) -> tuple[float, np.ndarray]:
     """f and g of one normalised design at the check's tighter tolerance (one full run)."""
+    res = _check_run(scenario, n_vars, x, settings)
+    return float(res.f[0]), np.asarray(res.g[0], float).copy()
+
+
+def _check_run(scenario: str, n_vars: int, x: ArrayLike, settings: CheckSettings | None,
+               condition: Any = None) -> Any:
+    """One design's run at the check's tolerance (in ``condition``: its vehicle, speeds)."""
+    from suspension_tuning.conditions import condition_params, condition_scenarios
     from suspension_tuning.vehicle.params import load_vehicle_params, with_integrator
     from suspension_tuning.vehicle.scenarios import run_scenario
 
     settings = load_check_settings() if settings is None else settings
     params = with_integrator(load_vehicle_params(), 'variable_step', rtol=settings.rtol,
                              atol=settings.atol)
-    res = run_scenario(scenario, np.asarray(x, float)[None, :], params=params, n_vars=n_vars,
-                       integrator='variable_step')
-    return float(res.f[0]), np.asarray(res.g[0], float).copy()
+    return run_scenario(scenario, np.asarray(x, float)[None, :],
+                        params=condition_params(condition, params), n_vars=n_vars,
+                        config=condition_scenarios(condition), integrator='variable_step')
 
 
 def check_options(scenario: str, n_vars: int, settings: CheckSettings | None = None
@@ -90,3 +98,29 @@ def check_options(scenario: str, n_vars: int, settings: CheckSettings | None = N
 
     return {'check_model': model, 'check_gtol': settings.gtol,
             'check_continuations': settings.continuations}
+
+
+def check_condition_options(scenario: str, n_vars: int,
+                            settings: CheckSettings | None = None) -> dict[str, Any]:
+    """:func:`~suspension_tuning.tuning.optimise_conditions`'s check arguments (built-in).
+
+    ``check_model`` ((1, n) design, conditions) -> one ``FullEvaluation`` per condition
+    (f, g and the named metrics) at the tighter tolerance, the design run in every
+    condition (its payload, speeds and road), and ``check_gtol``.
+    """
+    from suspension_tuning.evaluation import metric_table
+    from suspension_tuning.tuning import FullEvaluation
+
+    settings = load_check_settings() if settings is None else settings
+
+    def model(designs: ArrayLike, conditions: Any) -> list[FullEvaluation]:
+        x = np.atleast_2d(np.asarray(designs, float))[0]
+        out = []
+        for condition in conditions:
+            res = _check_run(scenario, n_vars, x, settings, condition)
+            names, table = metric_table(res.metrics, 1)
+            out.append(FullEvaluation(np.asarray(res.f, float), np.asarray(res.g, float),
+                                      metric_names=names, metrics=table))
+        return out
+
+    return {'check_model': model, 'check_gtol': settings.gtol}

@@ -985,7 +985,9 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
                         gradients: Mapping[str, SimplifiedGradient] | None = None,
                         callback: Callable[[dict[str, Any], RunCounter], bool | None]
                         | None = None,
-                        counter: RunCounter | None = None) -> OptimizeResult:
+                        counter: RunCounter | None = None,
+                        check_model: ConditionModel | None = None,
+                        check_gtol: float = 5e-3) -> OptimizeResult:
     """Dynamic-Q over a set of operating conditions (``request.condition_set``).
 
     The objective is the weighted mean of the per-condition objectives (form 'mean') or
@@ -1019,6 +1021,14 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
         counter; returning True stops the run.
     counter : RunCounter, optional
         Counter to continue (e.g. one holding the calibration runs).
+    check_model : callable, optional
+        The full model over conditions at a tighter solver tolerance
+        (:func:`suspension_tuning.answer_check.check_condition_options`): the reported
+        design runs once more in every condition (C paid full runs), and ``check``
+        holds both verdicts (max g <= ``check_gtol`` at the check), the combined
+        objective and each condition's f and largest g at the check.  A set is not
+        continued with shifted constraints (as :func:`optimise` does for one
+        condition): an infeasible check says so.
 
     Returns
     -------
@@ -1209,6 +1219,27 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
                       condition_f_best=f_c.tolist(),
                       condition_g_best=g_c.tolist(), condition_metrics_best=metrics,
                       worst_condition=conditions.names[int(np.argmax(f_c))])
+        if check_model is not None and not cancelled:
+            runs = check_model(np.asarray(rec['x'], float)[None, :], conditions.conditions)
+            counter.full_runs += n_c
+            f_chk = np.array([float(r.f[0]) for r in runs])
+            g_chk = np.array([np.asarray(r.g, float).reshape(-1)[:4] for r in runs])
+            m_chk = [{str(k): float(v) for k, v in zip(r.metric_names,
+                                                       np.asarray(r.metrics)[0])}
+                     if r.metrics is not None else {} for r in runs]
+            g_check = np.r_[g_chk.reshape(-1), extra_g(f_chk, g_chk, m_chk)]
+            check = check_summary(np.asarray(rec['g'], float), g_check,
+                                  combined_objective(f_chk, weights, request.condition_form),
+                                  check_gtol)
+            rows = g_check[:4 * n_c].reshape(n_c, 4)
+            check.update(
+                continued=False, continuations=0, first=dict(check),
+                x_checked=np.asarray(rec['x'], float).tolist(), check_gtol=check_gtol,
+                condition_f_check=f_chk.tolist(),
+                condition_max_g_check=[float(np.max(row)) for row in rows],
+                condition_names=conditions.names,
+                not_continued='a condition set is not continued with shifted constraints')
+            result.update(check=check, **counter.as_dict())
     return result
 
 

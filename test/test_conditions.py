@@ -293,3 +293,32 @@ def test_the_handling_over_two_conditions_improves_both_with_simplified_gradient
     assert result.worst_condition == 'laden_65'
     assert max(result.condition_f_best) < max(f_start)
     assert result.n_simplified_runs > 0
+
+
+def test_the_answer_over_a_set_is_checked_at_the_tighter_tolerance_in_every_condition(
+        monkeypatch):
+    from suspension_tuning.tuning import check_summary
+
+    conditions = _bowl_set()
+    monkeypatch.setattr(ConditionSet, 'from_text', staticmethod(lambda text: conditions))
+    request = TuningRequest('ride', 2, gradient_source='full', conditions='set',
+                            condition_form='worst', options={'maxiter': 40})
+
+    def tighter(designs, conditions):  # a check that finds condition b's g 0.5 higher
+        out = _bowl_model(designs, conditions)
+        for condition, run in zip(conditions, out):
+            run.g = run.g + (0.5 if condition.name == 'b' else 0.0)
+        return out
+
+    plain = optimise_conditions(request, _bowl_model)
+    result = optimise_conditions(request, _bowl_model, check_model=tighter, check_gtol=5e-3)
+    check = result.check
+    # C = 2 more paid full runs than the same run unchecked
+    assert result.n_full_runs == plain.n_full_runs + 2
+    assert check['feasible_run'] and check['feasible_check']  # -1 + 0.5 <= 0
+    assert check['condition_max_g_check'] == pytest.approx([-1.0, -0.5])
+    assert check['condition_f_check'] == pytest.approx(result.condition_f_best)
+    assert check['offset'] == pytest.approx([0.0] * 4 + [0.5] * 4)
+    assert check == {**check, **check_summary(result.g_best, np.r_[-np.ones(4),
+                                                                  -0.5 * np.ones(4)],
+                                              max(result.condition_f_best), 5e-3)}

@@ -94,6 +94,17 @@ def test_a_three_condition_goal_reports_every_condition_in_the_result_and_the_ba
             assert list(getattr(result, metrics_field)[c * k:(c + 1) * k]) == pytest.approx(
                 [shown[name] for name in CONDITION_METRICS], rel=1e-12)
     assert result.worst_condition == NAMES[int(np.argmax(result.condition_f))]
+    # The answer checked at the tighter solver tolerance in every condition (in the
+    # coordinator's process): the same bits as the check run here.
+    from suspension_tuning.answer_check import check_condition_options
+
+    runs = check_condition_options('ride', 2)['check_model'](
+        np.asarray(result.x)[None, :], conditions.conditions)
+    largest = max(0.0, max(float(np.max(run.g)) for run in runs))
+    assert result.check_max_violation == largest
+    assert result.check == ('feasible' if largest <= 5e-3 else 'infeasible')  # vehicle.yaml
+    assert 'at the tighter tolerance' in result.check_note
+    assert 'largest g at the check in condition' in result.check_note
     assert result.f == pytest.approx(max(result.condition_f))  # the worst-case objective
     assert result.baseline_f == pytest.approx(max(result.condition_baseline_f))
     report = format_result(result)  # what tune prints: every condition, the worst named

@@ -10,7 +10,10 @@ module gives it the workers and the gradient evaluator:
   (``Calibrate.condition``; cached by the gradient evaluator) and its gradient asked for
   in it (``EvaluateGradient.condition``);
 * the result carries the per-condition objectives and physical metrics of the reported
-  design and of the baseline, and the worst condition.
+  design and of the baseline, and the worst condition;
+* the reported design of the built-in model is run once more in every condition at the
+  tighter solver tolerance (in this process, :mod:`suspension_tuning.answer_check`),
+  and the result carries both verdicts.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from suspension_tuning_interfaces.action import Optimise
 from suspension_tuning_interfaces.msg import IterationRecord, TimeHistories
 from suspension_tuning_interfaces.srv import Calibrate, EvaluateGradient
 
+from suspension_tuning.answer_check import check_condition_options
 from suspension_tuning.nodes._services import ServiceCallError, call
 from suspension_tuning.optim.simplified_gradient import run_calibration_samples
 from suspension_tuning.physical_metrics import SHOWN, physical_metrics
@@ -186,7 +190,11 @@ def run_condition_goal(node: Any, goal_handle: Any, request: TuningRequest,
                 counter.calibration_runs += calibrate_condition(node, goal_handle, request,
                                                                 condition)
                 gradients[condition.name] = condition_gradient(node, request, condition)
-        result = optimise_conditions(request, model, gradients, on_iteration, counter)
+        checking, note = node._check_options(request, fingerprint)  # the built-in model
+        if checking['check_model'] is not None:
+            checking = check_condition_options(request.scenario, request.n_vars)
+        result = optimise_conditions(request, model, gradients, on_iteration, counter,
+                                     checking['check_model'], checking['check_gtol'])
     except (ValueError, ServiceCallError) as error:
         if node._cancel_requested():
             node.get_logger().info(f'goal cancelled ({error})')
@@ -203,7 +211,8 @@ def run_condition_goal(node: Any, goal_handle: Any, request: TuningRequest,
         return message
     message = action_result(result, history_msgs, t0, counter)
     message.model_fingerprint = fingerprint
-    message.check_note = 'not checked at a tighter solver tolerance (a condition set)'
+    if not result.get('check'):
+        message.check_note = note or 'not checked at a tighter solver tolerance'
     baseline = None
     if 'x_best' in result and not goal_handle.is_cancel_requested:
         x_base = load_design_space().baseline_x(request.n_vars)

@@ -232,6 +232,15 @@ def check_note(check: dict[str, Any]) -> str:
                  f"({'feasible' if check['feasible_check'] else 'infeasible'})")
         if not check['feasible_check']:
             text += '; the solver tolerance decides this design\'s feasibility'
+    elif check.get('not_continued') and first['feasible_run'] and not first['feasible_check']:
+        text += (f"; {check['not_continued']}: the solver tolerance decides this design's "
+                 'feasibility')
+    if check.get('condition_max_g_check'):  # a condition set: where the check is tightest
+        names = check.get('condition_names') or []
+        worst = int(np.argmax(check['condition_max_g_check']))
+        label = names[worst] if worst < len(names) else str(worst)
+        text += (f"; largest g at the check in condition {label} "
+                 f"({check['condition_max_g_check'][worst]:.4g})")
     return text
 
 
