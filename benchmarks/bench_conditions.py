@@ -19,8 +19,12 @@ Figures:
 * ``conditions_ride4_starts_solved``: starts whose reported design is within 1 % of the
   reference's worst-case f and has max g <= 0.005 in every condition (bench_method.py's
   definition of solved), of 6.
+* ``conditions_ride4_starts_feasible_at_check``: starts whose answer is feasible when run
+  again in every condition at the tighter solver tolerance (config/vehicle.yaml
+  ``integration.check``; max g <= its gtol), of 6.
 * ``conditions_ride4_median_paid_full_runs``: every full run a start pays, counted per
-  condition (a design in 6 conditions is 6 condition-runs), with its share of the
+  condition (a design in 6 conditions is 6 condition-runs), the check of its answer
+  included (6 condition-runs, one round), with its share of the
   calibration (all 96 calibration runs, as a user's first run pays them), median over the
   starts; ``..._rounds``: the same in rounds, the sequential batches with 6 workers (a
   design's 6 conditions are one round, the calibration's 16 samples per condition 16
@@ -73,7 +77,10 @@ def _options() -> dict:
     return with_noise_levels(vehicle_options(), 'ride', 'fixed_step')
 
 
-def _run(start: np.ndarray, conditions, gradients, source: str, maxiter: int | None = None):
+def _run(start: np.ndarray, conditions, gradients, source: str, maxiter: int | None = None,
+         check: bool = False):
+    """One start; ``check``: the answer checked at the tighter tolerance (C paid runs)."""
+    from suspension_tuning.answer_check import check_condition_options
     from suspension_tuning.evaluation import in_process_condition_model
     from suspension_tuning.tuning import TuningRequest, optimise_conditions
 
@@ -83,7 +90,8 @@ def _run(start: np.ndarray, conditions, gradients, source: str, maxiter: int | N
     request = TuningRequest('ride', N_VARS, start, source, options,
                             conditions=conditions.as_text(), condition_form='worst')
     return optimise_conditions(request, in_process_condition_model(),
-                               gradients if source == 'simplified' else None)
+                               gradients if source == 'simplified' else None,
+                               **(check_condition_options('ride', N_VARS) if check else {}))
 
 
 def _worst(x: np.ndarray, conditions) -> tuple[float, float]:
@@ -220,22 +228,26 @@ def main(argv: list[str] | None = None) -> int:
         print(f'no reference for {CASE}: run {COMMAND}', file=sys.stderr)
         return 1
     f_ref = float(reference['f'])
-    solved, paid, rounds = 0, [], []
+    solved, feasible_at_check, paid, rounds = 0, 0, [], []
     starts = benchmark_starts(N_VARS)[:args.starts]
     for name, x0 in starts:
         t = time.perf_counter()
-        r = _run(x0, conditions, gradients, 'simplified')
+        r = _run(x0, conditions, gradients, 'simplified', check=True)
         gap = 100.0 * (float(r.f_best) - f_ref) / abs(f_ref)
         ok = bool(gap <= SOLVED_GAP_PCT and r.max_violation_best <= SOLVED_VIOLATION)
         solved += ok
+        feasible_at_check += bool(r.check['feasible_check'])
+        # paid: the run, the check of its answer (one round of C runs) and the calibration
         paid.append(r.n_full_runs + total_calibration if ok else np.inf)
-        rounds.append(r.rounds + n_samples if ok else np.inf)
+        rounds.append(r.rounds + 1 + n_samples if ok else np.inf)
         print(f'conditions_ride4_{name}: f {r.f_best:.5f} gap {gap:+.2f} % max g '
               f'{r.max_violation_best:.4f} worst {r.worst_condition} iterations {r.nit} '
-              f'condition-runs {r.n_full_runs} rounds {r.rounds} stop {r.stop_test} '
+              f'condition-runs {r.n_full_runs} (check included) rounds {r.rounds} stop '
+              f'{r.stop_test} max g at the check {r.check["max_violation_check"]:.4f} '
               f'wall {time.perf_counter() - t:.1f} s', flush=True)
     print(f'conditions_ride4_reference_f: {f_ref:.6f}')
     print(f'conditions_ride4_starts_solved: {solved} of {len(starts)}')
+    print(f'conditions_ride4_starts_feasible_at_check: {feasible_at_check} of {len(starts)}')
     print(f'conditions_ride4_median_paid_full_runs: {float(np.median(paid)):g} condition-runs, '
           f'{float(np.median(rounds)):g} rounds')
     t1, t2, s = speedup(conditions, args.speedup_designs)
