@@ -64,7 +64,7 @@ Definitions (``suspension_tuning.studies.method_benchmark``):
   at its first solved design, which the budget's answer equals or betters).
   ``paid_ratio_vs_best_peer``: the smallest peer median over ours.
   ``ride4_runs_stopped_by_test``: ours' runs ended by a test of their own (xtol, ftol,
-  noise, rho_min), not by the iteration limit; ``ride4_stop_tests`` names them.
+  noise, bound_kkt, rho_min), not by the iteration limit; ``ride4_stop_tests`` names them.
   ``ride4_starts_solved_noisy_checked``: solved with g of the check at the tighter
   tolerance (which stands in for the fixed-step model).
 * **Rounds** (``method_benchmark.rounds``): sequential full-run rounds with a pool of

@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from suspension_tuning.optim.dynamic_q import CONVERGED_STATUSES
+
 #: Joins the sentence on the reported design and Dynamic-Q's stop message in a result.
 STOP_SEPARATOR = '; Dynamic-Q '
 
@@ -70,8 +72,6 @@ def statement(feasible: bool, iteration: int, max_violation: float) -> str:
             f'(max g = {float(max_violation):.4g}), iteration {int(iteration)}')
 
 
-#: Dynamic-Q's status codes of a converged run (xtol, ftol, rho_min at a feasible point).
-CONVERGED_STATUSES = (0, 1, 2)
 
 
 def design_success(result: Mapping[str, Any], design: ReportedDesign | None) -> bool:

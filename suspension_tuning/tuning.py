@@ -473,7 +473,7 @@ def optimise(request: TuningRequest, full_model: FullModel,
         answer to report is the best point (``x_best``, ``f_best``, ``g_best``,
         ``best_iteration``, ``best_feasible`` and ``constraint_values_best``; see
         :func:`~suspension_tuning.optim.dynamic_q.dynamic_q`).  ``stop_test`` names
-        the test that ended the run ('xtol', 'ftol', 'noise', 'rho_min', 'maxiter',
+        the test that ended the run ('xtol', 'ftol', 'noise', 'bound_kkt', 'rho_min', 'maxiter',
         'cancelled'); with ``check_model``, ``check`` holds the check's verdicts
         (:func:`check_summary`).  Every history record
         whose full run returned named metrics holds them (``metrics``: name -> value,

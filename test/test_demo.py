@@ -12,6 +12,8 @@ def test_demo_reports_an_optimiser_stop_and_fails_on_anything_else():
         'stopped: maximum number of iterations reached (last iterate infeasible)'
     )
     assert optimiser_stopped('stopped: move limit below rho_min at an infeasible point')
+    assert optimiser_stopped('converged: a corner of the box where the gradient points out '
+                             'of it, no constraint active (first-order optimal)')  # 6
     # stopped from outside, or no optimisation at all: the demo failed
     assert not optimiser_stopped('stopped by the callback or the caller')
     assert not optimiser_stopped('bad goal: n_vars must be 2 or 4')

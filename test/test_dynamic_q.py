@@ -498,3 +498,57 @@ def test_noise_test_ends_a_run_whose_steps_change_f_by_no_more_than_its_noise():
     assert np.max(np.abs(with_noise.x_best - [0.2, 0.6])) <= 0.02
     with pytest.raises(ValueError, match='noise_f'):
         DynamicQOptions(noise_f=-1.0)
+
+
+def _corner_problem(kkt: bool, x0=(0.6, 0.7)):
+    """min x1 + 2 x2 + (x1 - 0.2)^2 / 2 on [0, 1]^2, g = -1 (inactive): optimum (0, 0).
+
+    At (0, 0) the gradient (0.8, 2) points out of the box through both lower bounds:
+    the KKT conditions hold with the bounds' multipliers alone.
+    """
+    def evaluate(x):
+        return float(x[0] + 2.0 * x[1] + 0.5 * (x[0] - 0.2) ** 2), np.array([-1.0]), np.zeros(0)
+
+    def gradient(x):
+        return np.array([1.0 + (x[0] - 0.2), 2.0]), np.zeros((1, 2)), np.zeros((0, 2))
+
+    return dynamic_q(evaluate, gradient, list(x0), [0.0, 0.0], [1.0, 1.0],
+                     {'bound_kkt': kkt, 'xtol': 1e-5, 'converge_iterations': 2})
+
+
+def test_the_bound_kkt_test_stops_at_a_corner_where_the_gradient_points_out():
+    without, with_kkt = _corner_problem(False), _corner_problem(True)
+    assert without.stop_test == 'xtol'
+    assert with_kkt.stop_test == 'bound_kkt' and with_kkt.status == 6 and with_kkt.success
+    assert with_kkt.nfev < without.nfev  # the steps the xtol test waits for are saved
+    np.testing.assert_allclose(with_kkt.x_best, [0.0, 0.0], atol=1e-5)  # xtol
+    np.testing.assert_allclose(without.x_best, [0.0, 0.0], atol=1e-5)
+
+
+def test_the_bound_kkt_test_waits_while_a_derivative_points_into_the_box():
+    # (x1 - 0.2)^2 alone in x1: the optimum x1 = 0.2 is interior, so no corner is KKT
+    def evaluate(x):
+        return float(2.0 * x[1] + (x[0] - 0.2) ** 2), np.array([-1.0]), np.zeros(0)
+
+    def gradient(x):
+        return np.array([2.0 * (x[0] - 0.2), 2.0]), np.zeros((1, 2)), np.zeros((0, 2))
+
+    result = dynamic_q(evaluate, gradient, [0.6, 0.7], [0.0, 0.0], [1.0, 1.0],
+                       {'bound_kkt': True, 'xtol': 1e-5, 'converge_iterations': 2})
+    assert result.stop_test == 'xtol'
+    np.testing.assert_allclose(result.x_best, [0.2, 0.0], atol=1e-3)
+
+
+def test_the_bound_kkt_test_waits_while_a_constraint_is_active():
+    # the same corner, with g = x1 + x2 - 0 active there: a multiplier of g may be needed
+    def evaluate(x):
+        return (float(x[0] + 2.0 * x[1] + 0.5 * (x[0] - 0.2) ** 2),
+                np.array([-(x[0] + x[1]) - 1e-9]), np.zeros(0))
+
+    def gradient(x):
+        return (np.array([1.0 + (x[0] - 0.2), 2.0]), np.array([[-1.0, -1.0]]),
+                np.zeros((0, 2)))
+
+    result = dynamic_q(evaluate, gradient, [0.6, 0.7], [0.0, 0.0], [1.0, 1.0],
+                       {'bound_kkt': True, 'xtol': 1e-5, 'converge_iterations': 2})
+    assert result.stop_test != 'bound_kkt'

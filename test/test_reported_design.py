@@ -122,3 +122,18 @@ def test_best_record_follows_dynamic_q_rule_on_recorded_iterates():
                   {'f': 0.5, 'max_violation': 0.2}]
     assert best_record(infeasible, gtol) == (1, False)  # least violation, the first of two
     assert best_record([], gtol) is None
+
+
+@pytest.mark.parametrize('status, test', [(0, 'xtol'), (1, 'ftol'), (2, 'rho_min'),
+                                          (5, 'noise'), (6, 'bound_kkt')])
+def test_a_run_stopped_by_any_convergence_test_at_a_feasible_design_succeeds(status, test):
+    from suspension_tuning.optim.dynamic_q import STOP_TESTS
+    from suspension_tuning.reported_design import ReportedDesign, design_success
+
+    assert STOP_TESTS[status] == test  # dynamic_q's status codes
+    feasible = ReportedDesign(x=[0.5], f=0.1, g=[-0.1], iteration=2, feasible=True,
+                              max_violation=0.0)
+    assert design_success({'status': status}, feasible)
+    assert not design_success({'status': status}, ReportedDesign(
+        x=[0.5], f=0.1, g=[0.1], iteration=2, feasible=False, max_violation=0.1))
+    assert not design_success({'status': 3}, feasible)  # the iteration limit: not converged

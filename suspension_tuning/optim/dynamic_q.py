@@ -118,12 +118,17 @@ STATUS_MESSAGES = {
     3: 'stopped: maximum number of iterations reached',
     4: 'stopped: move limit below rho_min at an infeasible point',
     5: 'converged: steps change f and g by no more than their noise',
+    6: 'converged: a corner of the box where the gradient points out of it, no constraint '
+       'active (first-order optimal)',
     99: 'stopped by the callback or the caller',
 }
 """Status codes of the result (``status`` field) and their messages."""
 #: The test that ended a run, by status (the result's ``stop_test``).
 STOP_TESTS = {0: 'xtol', 1: 'ftol', 2: 'rho_min', 3: 'maxiter', 4: 'rho_min', 5: 'noise',
-              99: 'cancelled'}
+              6: 'bound_kkt', 99: 'cancelled'}
+#: Status codes of a converged run (xtol, ftol, rho_min at a feasible point, noise,
+#: bound-KKT): ``success`` when the point is feasible too.
+CONVERGED_STATUSES = (0, 1, 2, 5, 6)
 
 #: Values of ``DynamicQOptions.surrogate_constraint_curvature``.
 SURROGATE_CURVATURES = ('interpolate', 'zero')
@@ -197,6 +202,17 @@ class DynamicQOptions:
         ``2 noise_f`` and, with ``noise_g`` > 0, every g_j by at most ``2 noise_g``:
         its changes are then indistinguishable from the model's noise, which the
         ftol test cannot know.  0 disables [E: 0 for noise-free functions].
+    bound_kkt : bool
+        Also stop (status 6, the bound-KKT test) at a feasible iterate where every
+        variable lies on a bound (within ``xtol``) with its derivative pointing out of
+        the box (by more
+        than ``ftol (1 + |f|)`` over the variable's range) and every inequality
+        constraint is inactive (g_j < -max(10 gtol, 2 noise_g); no equality
+        constraints): the Karush-Kuhn-Tucker conditions hold there with the bounds'
+        multipliers alone (Snyman 2005, ch. 5; Nocedal and Wright 2006, thm. 12.1), and
+        the steps the xtol test waits for would stay at that corner.  The gradient is
+        the one the run uses (a simplified model's, corrected) [E: off for analytic
+        problems; on for the vehicle, where handling optima sit at a corner].
     lfopc : dict
         Options of the LFOPC subproblem solver (see
         :class:`~suspension_tuning.optim.lfopc.LfopOptions`).
@@ -219,6 +235,7 @@ class DynamicQOptions:
     curvature_min_step: float = 0.0
     noise_f: float = 0.0
     noise_g: float = 0.0
+    bound_kkt: bool = False
     lfopc: Mapping[str, Any] | None = None
 
     def __post_init__(self) -> None:
@@ -263,6 +280,8 @@ class DynamicQOptions:
             value = getattr(self, name)
             if not isinstance(value, int | float) or not np.isfinite(value) or value < 0:
                 raise ValueError(f'{name} must be finite and >= 0, got {value!r}')
+        if not isinstance(self.bound_kkt, bool):
+            raise ValueError(f'bound_kkt must be true or false, got {self.bound_kkt!r}')
         LfopOptions.from_mapping(self.lfopc)
 
     @classmethod
@@ -634,7 +653,7 @@ class DynamicQ:
             jac=None if cur.df is None else cur.df.copy(),
             max_violation=viol,
             maxcv=viol,
-            success=bool(status in (0, 1, 2, 5) and feasible),
+            success=bool(status in CONVERGED_STATUSES and feasible),
             status=status,
             stop_test=STOP_TESTS.get(status, '') if status is not None else '',
             message=self.message
@@ -743,6 +762,22 @@ class DynamicQ:
                 _max_violation(point.g, point.h)
                 < _max_violation(self._least_violating.g, self._least_violating.h)):
             self._least_violating = point
+
+    def _at_bound_kkt(self, point: _Point) -> bool:
+        """The bound-KKT test (option ``bound_kkt``) at an iterate with its gradient."""
+        opt = self.options
+        if not opt.bound_kkt or point.df is None or point.h.size or not self._feasible(point):
+            return False
+        if point.g.size and np.max(point.g) >= -max(10.0 * opt.gtol, 2.0 * opt.noise_g):
+            return False
+        width = self.upper - self.lower
+        if not np.all(np.isfinite(width)):
+            return False
+        # on a bound within xtol: the subproblem solver's iterates stop short of it
+        significant = np.abs(point.df) * width > opt.ftol * (1.0 + abs(point.f))
+        out = (((point.x - self.lower <= opt.xtol) & (point.df > 0.0))
+               | ((self.upper - point.x <= opt.xtol) & (point.df < 0.0)))
+        return bool(np.all(out & significant))
 
     def _within_noise(self, cur: _Point, new: _Point) -> bool:
         """The noise test: the step's signal is below the noise (``noise_f``, ``noise_g``).
@@ -931,6 +966,9 @@ class DynamicQ:
             if cur.df is None:
                 value = yield from self._request('gradient', cur.x)
                 self._parse_gradient(value, cur)
+            if self._at_bound_kkt(cur):
+                self.status = 6
+                break
             a, b, c = self._curvatures(ref, cur)
             self._last_curvature = (a, np.asarray(b, float).copy(), np.asarray(c, float).copy())
             rho = self._rho
