@@ -8,10 +8,12 @@ largest per-condition f_ride, posed for Dynamic-Q in epigraph form
 
 What it runs from the 6 benchmark starts of bench_method.py
 (``method_benchmark.benchmark_starts(4)``: 'baseline', 'centre' and 4 seeded
-Latin-hypercube points): Dynamic-Q with eq. 25-scaled simplified gradients, each
-condition's pitch-plane model calibrated in its condition (config/simplified_models.yaml
-``scaling``: 16 full runs per condition, shared by the starts and cached) and corrected
-by a secant correction of its own; the Dynamic-Q options of config/optimiser.yaml
+Latin-hypercube points): Dynamic-Q with simplified gradients, each condition's
+pitch-plane model with the calibration a tuning goal spends by default (the
+coordinator's ``calibration_samples`` -1: config/simplified_models.yaml
+``scaling.run_samples``, none on the 4-variable ride, unit scaling; ``--calibration-samples
+N`` for N eq. 25 samples per condition, shared by the starts and cached) and corrected by
+a secant correction of its own; the Dynamic-Q options of config/optimiser.yaml
 ``vehicle`` with the built-in ride model's noise levels.
 
 Figures:
@@ -24,11 +26,10 @@ Figures:
   ``integration.check``; max g <= its gtol), of 6.
 * ``conditions_ride4_median_paid_full_runs``: every full run a start pays, counted per
   condition (a design in 6 conditions is 6 condition-runs), the check of its answer
-  included (6 condition-runs, one round), with its share of the
-  calibration (all 96 calibration runs, as a user's first run pays them), median over the
-  starts; ``..._rounds``: the same in rounds, the sequential batches with 6 workers (a
-  design's 6 conditions are one round, the calibration's 16 samples per condition 16
-  rounds).
+  included (6 condition-runs, one round), with the calibration's runs (all N x 6, as a
+  user's first run pays them; none by default), median over the starts;
+  ``..._rounds``: the same in rounds, the sequential batches with 6 workers (a design's 6
+  conditions are one round, N samples per condition N rounds).
 * ``conditions_speedup_2_workers``: wall time of evaluating designs in the 6 conditions
   with 1 worker process over that with 2 (``concurrent.futures`` processes, one numba
   thread each, the condition-runs shared as the pool shares a batch: ``--speedup-designs``
@@ -43,7 +44,7 @@ the normalised box, Dynamic-Q with full-model gradients from the 'baseline' and
 polished by SciPy SLSQP on the epigraph form (kept when it finds a lower feasible f).
 
 Run: .venv/bin/python benchmarks/bench_conditions.py [--starts K] [--write-reference]
-[--speedup-designs M] [--speedup-only]
+[--speedup-designs M] [--speedup-only] [--calibration-samples N]
 """
 
 from __future__ import annotations
@@ -193,6 +194,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--starts', type=int, default=6, help='how many of the 6 starts')
     parser.add_argument('--write-reference', action='store_true')
+    parser.add_argument('--calibration-samples', type=int, default=-1, metavar='N',
+                        help='eq. 25 samples per condition (0: none; default -1: what a '
+                        'tuning goal spends, config/simplified_models.yaml '
+                        'scaling.run_samples)')
     parser.add_argument('--speedup-only', action='store_true',
                         help='only the 1- vs 2-worker timing')
     parser.add_argument('--speedup-designs', type=int, default=6,
@@ -204,6 +209,7 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault('NUMBA_NUM_THREADS', '1')
     from suspension_tuning.conditions import load_conditions
     from suspension_tuning.evaluation import in_process_condition_gradients
+    from suspension_tuning.optim.simplified_gradient import run_calibration_samples
     from suspension_tuning.studies.method_benchmark import benchmark_starts
 
     conditions = load_conditions()
@@ -213,13 +219,14 @@ def main(argv: list[str] | None = None) -> int:
               f'{t2:.1f} s on 2, {args.speedup_designs} designs x {len(conditions)} '
               'conditions)')
         return 0
-    gradients = in_process_condition_gradients(conditions, N_VARS)
+    n_samples = run_calibration_samples('ride', N_VARS, args.calibration_samples)
+    gradients = in_process_condition_gradients(conditions, N_VARS, n_samples=n_samples)
     calibration_runs = sum(g.calibration_runs for g in gradients.values())
-    n_samples = next(iter(gradients.values())).scaling.key['n_samples']
     total_calibration = n_samples * len(conditions)
     print(f'conditions: {", ".join(conditions.names)}')
     print(f'conditions_calibration_runs: {total_calibration} '
-          f'({calibration_runs} run now, the rest from the cache)')
+          + (f'({calibration_runs} run now, the rest from the cache)' if n_samples
+             else '(none: unit scaling, what a tuning goal spends by default)'))
     if args.write_reference:
         entry = write_reference(conditions, gradients)
         print(f'conditions_reference_f: {entry["f"]:.6f} ({entry["found_by"]})')

@@ -213,6 +213,8 @@ def in_process_condition_gradients(conditions: Any, n_vars: int,
     One eq. 25 calibration per condition (N full runs in that condition, config/
     simplified_models.yaml ``scaling``), kept in ``cache_dir`` (default
     ``~/.cache/suspension_tuning/calibration``) under a key that holds the condition.
+    ``n_samples`` 0: none, unit scaling in every condition (as the coordinator runs a
+    case whose ``scaling.run_samples`` is 0; the run's correction maps the slopes).
 
     Returns
     -------
@@ -234,8 +236,15 @@ def in_process_condition_gradients(conditions: Any, n_vars: int,
 
     directory = Path(cache_dir) if cache_dir else (
         Path.home() / '.cache' / 'suspension_tuning' / 'calibration')
-    n_samples, seed = calibration_settings(n_samples)
     out: dict[str, Any] = {}
+    if n_samples == 0:  # none: unit scaling, the run's correction maps the slopes
+        for condition in getattr(conditions, 'conditions', conditions):
+            gradient = SimplifiedGradient(scenario, n_vars, None,
+                                          condition=condition.as_text())
+            gradient.calibration_runs = 0
+            out[condition.name] = gradient
+        return out
+    n_samples, seed = calibration_settings(n_samples)
     for condition in getattr(conditions, 'conditions', conditions):
         text = condition.as_text()
         key = scaling_key(scenario, n_vars, n_samples, seed)
