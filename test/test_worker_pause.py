@@ -65,3 +65,25 @@ def test_a_worker_that_renews_answers_paused_until_its_new_participant_is_up(
     assert answer.error.startswith(PAUSED_ERROR)
     assert 'joins the graph again as a new DDS participant' in answer.error
     assert sim.pause_watch.renewal_due.is_set()  # run_node now makes the node again
+
+
+def test_a_worker_made_again_keeps_the_parameters_set_while_it_ran(ros_context, executor):
+    from rclpy.parameter import Parameter
+
+    from suspension_tuning.nodes._spin import changeable_parameters, kept_parameters
+    from suspension_tuning.nodes.full_vehicle_sim import FullVehicleSimNode
+
+    first = FullVehicleSimNode(name='renewed_sim', context=ros_context)
+    # as `ros2 param set /renewed_sim telemetry_rate 1.5` would (default 0: at once)
+    assert first.set_parameters([Parameter('telemetry_rate', value=1.5)])[0].successful
+    saved = changeable_parameters(first)
+    names = [p.name for p in saved]
+    assert 'telemetry_rate' in names and 'model' not in names  # model: read-only
+    first.destroy_node()
+    second = FullVehicleSimNode(name='renewed_sim', context=ros_context)
+    try:
+        assert second.get_parameter('telemetry_rate').value == 0.0  # as made
+        assert kept_parameters(second, saved) == ['telemetry_rate']  # only what differs
+        assert second.get_parameter('telemetry_rate').value == 1.5
+    finally:
+        second.destroy_node()

@@ -223,6 +223,34 @@ class SpinningGraph:
             node.destroy_node()
 
 
+def changeable_parameters(node: Node) -> list[Any]:
+    """The node's parameters that may change while it runs (not read-only), as set now."""
+    names = list(node.list_parameters([], 0).names)  # depth 0: every parameter
+    return [parameter for parameter, descriptor
+            in zip(node.get_parameters(names), node.describe_parameters(names))
+            if not descriptor.read_only]
+
+
+def kept_parameters(node: Node, saved: list[Any]) -> list[str]:
+    """Set the ``saved`` values (:func:`changeable_parameters`) that differ on ``node``.
+
+    A node made again keeps what ``ros2 param set`` changed on its predecessor; a
+    value it refuses now stays as made, with a warning.  Returns the names set.
+    """
+    changed = [p for p in saved
+               if node.has_parameter(p.name) and node.get_parameter(p.name).value != p.value]
+    done = []
+    for parameter, result in zip(changed, node.set_parameters(changed)):
+        if result.successful:
+            done.append(parameter.name)
+        else:
+            node.get_logger().warning(f'parameter {parameter.name} not kept: {result.reason}')
+    if done:
+        node.get_logger().info('kept the parameters set while it ran: ' + ', '.join(
+            f'{p.name}={p.value!r}' for p in changed if p.name in done))
+    return done
+
+
 def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
              name: str | None = None, rename: bool = False,
              renew_after_pause: bool = False) -> None:
@@ -247,7 +275,8 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
         PauseWatch`) is made again, in a new context (a new DDS participant), after a
         pause of the process longer than the watch's bound: its peers then find it as
         they find a process restarted under its name.  The pause's work in progress
-        ends first (the executor's shutdown waits for its callbacks, up to 10 s).
+        ends first (the executor's shutdown waits for its callbacks, up to 10 s); the
+        parameters set while it ran (``ros2 param set``) are set on the new node too.
 
     A parameter value the node cannot use (:class:`~suspension_tuning.nodes._parameters.
     ParameterError`) or a configuration file it cannot use (:class:`~suspension_tuning.
@@ -265,9 +294,12 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
     rclpy.init(args=args)
     if name is not None and not require_unique(name, start_check(name, [name]), rename):
         return  # Ctrl-C or SIGTERM during the check
+    kept: list[Any] = []  # parameters set while the node ran, for its renewal
     while True:
         try:
             node = make_node()
+            if kept:
+                kept_parameters(node, kept)
         except (ParameterError, ConfigError) as error:
             rclpy.try_shutdown()
             print(f'{name or "node"}: not started: {error}', file=sys.stderr)
@@ -291,6 +323,8 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
         try:
             spinning.wait(until=None if watch is None else watch.renewal_due.is_set)
             renewing = watch is not None and watch.renewal_due.is_set() and rclpy.ok()
+            if renewing:
+                kept = changeable_parameters(node)
         except KeyboardInterrupt:
             interrupted = True
         finally:
