@@ -244,9 +244,11 @@ def main(argv: list[str] | None = None) -> int:
         ok = bool(gap <= SOLVED_GAP_PCT and r.max_violation_best <= SOLVED_VIOLATION)
         solved += ok
         feasible_at_check += bool(r.check['feasible_check'])
-        # paid: the run, the check of its answer (one round of C runs) and the calibration
+        # paid: the run, each check of its answer (a round of C runs; a second one after a
+        # continuation with shifted constraints) and the calibration
+        checks = 1 + int(r.check.get('continuations', 0))
         paid.append(r.n_full_runs + total_calibration if ok else np.inf)
-        rounds.append(r.rounds + 1 + n_samples if ok else np.inf)
+        rounds.append(r.rounds + checks + n_samples if ok else np.inf)
         print(f'conditions_ride4_{name}: f {r.f_best:.5f} gap {gap:+.2f} % max g '
               f'{r.max_violation_best:.4f} worst {r.worst_condition} iterations {r.nit} '
               f'condition-runs {r.n_full_runs} (check included) rounds {r.rounds} stop '

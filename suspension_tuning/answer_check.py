@@ -106,7 +106,8 @@ def check_condition_options(scenario: str, n_vars: int,
 
     ``check_model`` ((1, n) design, conditions) -> one ``FullEvaluation`` per condition
     (f, g and the named metrics) at the tighter tolerance, the design run in every
-    condition (its payload, speeds and road), and ``check_gtol``.
+    condition (its payload, speeds and road), ``check_gtol`` and ``check_continuations``
+    (config/vehicle.yaml ``integration.check``).
     """
     from suspension_tuning.evaluation import metric_table
     from suspension_tuning.tuning import FullEvaluation
@@ -123,4 +124,5 @@ def check_condition_options(scenario: str, n_vars: int,
                                       metric_names=names, metrics=table))
         return out
 
-    return {'check_model': model, 'check_gtol': settings.gtol}
+    return {'check_model': model, 'check_gtol': settings.gtol,
+            'check_continuations': settings.continuations}

@@ -987,7 +987,8 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
                         | None = None,
                         counter: RunCounter | None = None,
                         check_model: ConditionModel | None = None,
-                        check_gtol: float = 5e-3) -> OptimizeResult:
+                        check_gtol: float = 5e-3,
+                        check_continuations: int = 0) -> OptimizeResult:
     """Dynamic-Q over a set of operating conditions (``request.condition_set``).
 
     The objective is the weighted mean of the per-condition objectives (form 'mean') or
@@ -1026,9 +1027,11 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
         (:func:`suspension_tuning.answer_check.check_condition_options`): the reported
         design runs once more in every condition (C paid full runs), and ``check``
         holds both verdicts (max g <= ``check_gtol`` at the check), the combined
-        objective and each condition's f and largest g at the check.  A set is not
-        continued with shifted constraints (as :func:`optimise` does for one
-        condition): an infeasible check says so.
+        objective and each condition's f and largest g at the check.  An answer
+        feasible on the run's model and infeasible at the check is continued, as
+        :func:`optimise` does for one condition, with every g row shifted up by the
+        offset the check measured there (at most ``check_continuations`` times); the
+        continued run's answer is the best by its shifted constraints, checked again.
 
     Returns
     -------
@@ -1079,21 +1082,20 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
                      for spec in specs]
     staircase = (([False] * n_c if worst else []) + [True] * (4 * n_c)
                  + [spec.quantity in TYRE_HOP_NAMES for spec in specs for _ in range(n_c)])
-    opt = DynamicQ(start, lower, upper, options, gradient_source=request.gradient_source,
-                   surrogate_rule_constraints=lambda m: staircase[:m] + [True] * (
-                       m - len(staircase)))
     correction_options = CorrectionOptions.from_mapping(request.correction)
     correct = request.gradient_source == 'simplified' and correction_options.method != 'none'
     corrections: dict[str, SecantCorrection] = {}
     records: list[dict[str, Any]] = []
-    cancelled = False
+    #: added to the g rows (tyre hop, extra constraints) after a check found the answer
+    #: infeasible at the tighter tolerance (the offset it measured there)
+    shift = np.zeros(4 * n_c + len(specs) * n_c)
 
     def problem_values(z: Array) -> tuple[float, Array]:
         x = z[:n]
         known = np.asarray(x, float).tobytes() in terms.values
         f_c, g_c, metrics = terms.at(x)
         rounds[0] += 0 if known else 1
-        g_all = np.r_[g_c.reshape(-1), extra_g(f_c, g_c, metrics)]
+        g_all = np.r_[g_c.reshape(-1), extra_g(f_c, g_c, metrics)] + shift
         if worst:
             return float(z[n]), np.r_[f_c - z[n], g_all]
         return float(np.dot(weights, f_c)), g_all
@@ -1155,36 +1157,51 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
             return df, dg
         return weights @ df_c, dg_rows
 
-    while (ask := opt.ask()) is not None:
-        kind, z = ask
-        try:
-            if kind == 'evaluate':
-                f, g = problem_values(z)
-                record = opt.tell((f, g, None))
-            else:
-                df, dg = problem_gradient(z)
-                record = opt.tell((df, dg, None), source=request.gradient_source)
-        except RunCancelled:
-            opt.stop('cancelled')
-            cancelled = True
-            break
-        if record is None:
-            continue
-        x = np.asarray(record['x'], float)[:n]
-        f_c, g_c, metrics = terms.at(x)
-        g_all = np.r_[g_c.reshape(-1), extra_g(f_c, g_c, metrics)]
-        out = {'iteration': int(record['iteration']), 'x': x,
-               'f': combined_objective(f_c, weights, request.condition_form),
-               'g': g_all, 'rho': record['rho'], 'rho_next': record['rho_next'],
-               'max_violation': float(max(0.0, np.max(g_all))),
-               'condition_f': f_c.tolist(), 'condition_metrics': metrics}
-        if worst:
-            out['epigraph_t'] = float(record['x'][n])
-        records.append(out)
-        if callback is not None and callback(out, counter):
-            opt.stop('cancelled')
-            cancelled = True
-            break
+    def drive(start_z: Array) -> tuple[OptimizeResult, bool]:
+        """One Dynamic-Q run from ``start_z`` on the g rows + ``shift``; records appended."""
+        opt = DynamicQ(start_z, lower, upper, options, gradient_source=request.gradient_source,
+                       surrogate_rule_constraints=lambda m: staircase[:m] + [True] * (
+                           m - len(staircase)))
+        first = len(records)
+        while (ask := opt.ask()) is not None:
+            kind, z = ask
+            try:
+                if kind == 'evaluate':
+                    f, g = problem_values(z)
+                    record = opt.tell((f, g, None))
+                else:
+                    df, dg = problem_gradient(z)
+                    record = opt.tell((df, dg, None), source=request.gradient_source)
+            except RunCancelled:
+                opt.stop('cancelled')
+                return opt.result(), True
+            if record is None:
+                continue
+            x = np.asarray(record['x'], float)[:n]
+            f_c, g_c, metrics = terms.at(x)
+            g_all = np.r_[g_c.reshape(-1), extra_g(f_c, g_c, metrics)]
+            out = {'iteration': first + int(record['iteration']), 'x': x,
+                   'f': combined_objective(f_c, weights, request.condition_form),
+                   'g': g_all, 'rho': record['rho'], 'rho_next': record['rho_next'],
+                   'max_violation': float(max(0.0, np.max(g_all))),
+                   'condition_f': f_c.tolist(), 'condition_metrics': metrics}
+            if worst:
+                out['epigraph_t'] = float(record['x'][n])
+            if shift.any():
+                out['shift'] = shift.tolist()
+            records.append(out)
+            if callback is not None and callback(out, counter):
+                opt.stop('cancelled')
+                return opt.result(), True
+        return opt.result(), False
+
+    def start_at(x: Array) -> Array:
+        """Dynamic-Q's start for design x (in the worst form with t = its largest f_c)."""
+        return np.r_[x, float(np.max(terms.at(x)[0]))] if worst else np.asarray(x, float)
+
+    result, cancelled = drive(start)
+    nit = int(result.nit)
+
     def worst_values(x: Array) -> tuple[list[float], Array]:
         """Each extra constraint's largest value over the conditions, and all (S, C)."""
         key = np.asarray(x, float)[:n].tobytes()
@@ -1193,7 +1210,59 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
         values = condition_constraint_values(specs, *terms.values[key])
         return values.max(axis=1).tolist(), values
 
-    result = opt.result()
+    def best_of(first: int) -> tuple[int, bool] | None:
+        """The run's answer among the records from ``first`` on, by their shifted g."""
+        chosen = [dict(rec, g=np.asarray(rec['g'], float) + np.asarray(
+                      rec.get('shift', np.zeros_like(shift)), float)) for rec in records[first:]]
+        for rec in chosen:
+            rec['max_violation'] = float(max(0.0, np.max(rec['g'])))
+        best = best_record(chosen, gtol)
+        return None if best is None else (first + best[0], best[1])
+
+    def checked(x: Array, g_run: Array) -> dict[str, Any]:
+        """The check of design x in every condition (C paid full runs)."""
+        runs = check_model(np.asarray(x, float)[None, :], conditions.conditions)
+        counter.full_runs += n_c
+        f_chk = np.array([float(r.f[0]) for r in runs])
+        g_chk = np.array([np.asarray(r.g, float).reshape(-1)[:4] for r in runs])
+        m_chk = [{str(k): float(v) for k, v in zip(r.metric_names, np.asarray(r.metrics)[0])}
+                 if r.metrics is not None else {} for r in runs]
+        g_check = np.r_[g_chk.reshape(-1), extra_g(f_chk, g_chk, m_chk)]
+        out = check_summary(g_run, g_check, combined_objective(
+            f_chk, weights, request.condition_form), check_gtol)
+        out.update(x_checked=np.asarray(x, float).tolist(), condition_f_check=f_chk.tolist(),
+                   condition_max_g_check=[float(np.max(row))
+                                          for row in g_check[:4 * n_c].reshape(n_c, 4)])
+        return out
+
+    best = best_of(0)
+    check: dict[str, Any] | None = None
+    if best is not None and check_model is not None and not cancelled:
+        rec = records[best[0]]
+        check = checked(rec['x'], np.asarray(rec['g'], float))
+        check.update(continued=False, continuations=0, first=dict(check),
+                     check_gtol=check_gtol, condition_names=conditions.names)
+        # An infeasible answer at the tighter tolerance: Dynamic-Q goes on from it with
+        # the g rows shifted up by the offset the check measured there (accumulated), as
+        # optimise does for one condition, and the new answer is checked again.
+        while (not check['feasible_check'] and check['feasible_run']
+               and check['continuations'] < check_continuations and not cancelled):
+            shift += np.maximum(0.0, np.asarray(check['offset'], float))
+            first = len(records)
+            result, cancelled = drive(start_at(np.asarray(records[best[0]]['x'], float)))
+            nit += int(result.nit)
+            check.update(continued=True, continuations=check['continuations'] + 1,
+                         shift=shift.tolist(), first_iteration=first)
+            found = best_of(first)
+            if found is None or cancelled:
+                break
+            best = found
+            rec = records[best[0]]
+            check.update(checked(rec['x'], np.asarray(rec['g'], float)))
+        if not check['feasible_check'] and not check['continued']:
+            check['not_continued'] = ('no continuation with shifted constraints left '
+                                      f'(check_continuations {check_continuations})')
+
     last = np.asarray(result.x, float)[:n]
     result.update(counter.as_dict(), scenario=request.scenario, n_vars=n,
                   gradient_source=request.gradient_source,
@@ -1203,10 +1272,9 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
                                                for simplified in by_simplified],
                   condition_names=conditions.names, condition_form=request.condition_form,
                   conditions=conditions.as_dict(), history=records, rounds=rounds[0],
-                  x=np.asarray(result.x, float)[:n], cancelled=cancelled,
+                  x=last, cancelled=cancelled, nit=nit,
                   correction={name: c.summary() for name, c in corrections.items()}
                   if corrections else {'method': 'none' if not correct else 'secant'})
-    best = best_record(records, gtol)
     if best is not None:
         k, feasible = best
         rec = records[k]
@@ -1219,27 +1287,8 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
                       condition_f_best=f_c.tolist(),
                       condition_g_best=g_c.tolist(), condition_metrics_best=metrics,
                       worst_condition=conditions.names[int(np.argmax(f_c))])
-        if check_model is not None and not cancelled:
-            runs = check_model(np.asarray(rec['x'], float)[None, :], conditions.conditions)
-            counter.full_runs += n_c
-            f_chk = np.array([float(r.f[0]) for r in runs])
-            g_chk = np.array([np.asarray(r.g, float).reshape(-1)[:4] for r in runs])
-            m_chk = [{str(k): float(v) for k, v in zip(r.metric_names,
-                                                       np.asarray(r.metrics)[0])}
-                     if r.metrics is not None else {} for r in runs]
-            g_check = np.r_[g_chk.reshape(-1), extra_g(f_chk, g_chk, m_chk)]
-            check = check_summary(np.asarray(rec['g'], float), g_check,
-                                  combined_objective(f_chk, weights, request.condition_form),
-                                  check_gtol)
-            rows = g_check[:4 * n_c].reshape(n_c, 4)
-            check.update(
-                continued=False, continuations=0, first=dict(check),
-                x_checked=np.asarray(rec['x'], float).tolist(), check_gtol=check_gtol,
-                condition_f_check=f_chk.tolist(),
-                condition_max_g_check=[float(np.max(row)) for row in rows],
-                condition_names=conditions.names,
-                not_continued='a condition set is not continued with shifted constraints')
-            result.update(check=check, **counter.as_dict())
+    if check is not None:
+        result.update(check=check)
     return result
 
 

@@ -322,3 +322,45 @@ def test_the_answer_over_a_set_is_checked_at_the_tighter_tolerance_in_every_cond
     assert check == {**check, **check_summary(result.g_best, np.r_[-np.ones(4),
                                                                   -0.5 * np.ones(4)],
                                               max(result.condition_f_best), 5e-3)}
+
+
+def test_an_answer_infeasible_at_the_check_is_continued_with_shifted_constraints(
+        monkeypatch):
+    conditions = _bowl_set()
+    monkeypatch.setattr(ConditionSet, 'from_text', staticmethod(lambda text: conditions))
+    request = TuningRequest('ride', 2, gradient_source='full', conditions='set',
+                            condition_form='worst', options={'maxiter': 40})
+
+    def limited(offset):
+        """The bowls with x_1 <= 0.5 - offset in condition b (each tyre-hop row)."""
+        def model(designs, conditions):
+            out = _bowl_model(designs, conditions)
+            for condition, run in zip(conditions, out):
+                if condition.name == 'b':
+                    x1 = np.atleast_2d(designs)[:, 0]
+                    run.g = np.repeat((x1 - 0.5 + offset)[:, None], 4, axis=1)
+            return out
+        return model
+
+    # the run's model allows x_1 <= 0.5, the tighter check only x_1 <= 0.4
+    result = optimise_conditions(request, limited(0.0), check_model=limited(0.1),
+                                 check_gtol=5e-3, check_continuations=2)
+    check = result.check
+    assert not check['first']['feasible_check'] and check['first']['feasible_run']
+    assert check['continued'] and check['continuations'] == 1
+    assert check['shift'][4:8] == pytest.approx([0.1] * 4, abs=2e-3)  # b's rows
+    assert check['feasible_check']
+    # the minimax with x_1 <= 0.4: b's bowl is the worse one, x_2 at its centre 0.5,
+    # f = (0.8 - 0.4)^2 = 0.16 (the unshifted answer, halfway between the centres at
+    # (0.5, 0.4), had f = 0.3^2 + 0.1^2 = 0.10)
+    np.testing.assert_allclose(result.x_best, [0.4, 0.5], atol=3e-3)
+    assert result.f_best == pytest.approx(0.16, abs=3e-3)
+    # the continued run's records follow the first run's
+    iterations = [rec['iteration'] for rec in result.history]
+    assert iterations == sorted(iterations) and 'shift' in result.history[-1]
+    # without continuations left: the answer stays, infeasible at the check, and says so
+    plain = optimise_conditions(request, limited(0.0), check_model=limited(0.1),
+                                check_gtol=5e-3)
+    assert not plain.check['feasible_check'] and not plain.check['continued']
+    assert 'no continuation' in plain.check['not_continued']
+    np.testing.assert_allclose(plain.x_best, [0.5, 0.4], atol=3e-3)

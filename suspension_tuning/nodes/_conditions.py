@@ -194,7 +194,8 @@ def run_condition_goal(node: Any, goal_handle: Any, request: TuningRequest,
         if checking['check_model'] is not None:
             checking = check_condition_options(request.scenario, request.n_vars)
         result = optimise_conditions(request, model, gradients, on_iteration, counter,
-                                     checking['check_model'], checking['check_gtol'])
+                                     checking['check_model'], checking['check_gtol'],
+                                     checking['check_continuations'])
     except (ValueError, ServiceCallError) as error:
         if node._cancel_requested():
             node.get_logger().info(f'goal cancelled ({error})')
