@@ -613,7 +613,9 @@ def _check_and_continue(result: OptimizeResult, request: TuningRequest,
         return float(run.f[0]), np.asarray(run.g[0], float)
 
     x_best = np.asarray(result.x_best, float)
-    k = len(np.asarray(terms.evaluate_cached(x_best)[1]))
+    # the g rows (eq. 11, then the extra constraints) as reported: no run of x_best,
+    # which a resumed run may have only in the bag's history
+    k = len(np.asarray(result.g_best, float))
     f_c, g_c = checked(x_best)
     check = check_summary(np.asarray(result.g_best, float)[:len(g_c)], g_c, f_c, check_gtol)
     check.update(continued=False, continuations=0, first=dict(check),

@@ -254,3 +254,35 @@ def test_an_answer_the_check_confirms_is_not_continued():
     assert checked.check['feasible_check'] and not checked.check['continued']
     assert checked.n_full_runs == plain.n_full_runs + 1  # the check's one run
     np.testing.assert_array_equal(checked.x_best, plain.x_best)
+
+
+@pytest.mark.parametrize('interrupted_after', [1, 2])
+def test_a_run_resumed_from_its_history_pays_what_the_uninterrupted_run_pays(
+        interrupted_after):
+    """The 2-variable handling (full gradients, the answer checked) interrupted after 1 or
+    2 iterations and resumed from its records: the same full runs as without the break
+    (the check of a resumed answer needs no new run of a design of the history)."""
+    from suspension_tuning import evaluation
+    from suspension_tuning.answer_check import check_options
+    from suspension_tuning.studies.common import vehicle_options
+    from suspension_tuning.tuning import RunCounter, with_noise_levels
+
+    def full_model(points):
+        run = evaluation.evaluate('handling', points)
+        return FullEvaluation(run.f, run.g)
+
+    def request(maxiter):
+        options = with_noise_levels(vehicle_options(), 'handling') | {'maxiter': maxiter}
+        return TuningRequest('handling', 2, None, 'full', options)
+
+    def counts(record, counter):  # as the coordinator records each iteration's count
+        record['n_full_runs'] = counter.full_runs
+
+    checking = check_options('handling', 2)
+    short = optimise(request(interrupted_after), full_model, callback=counts, **checking)
+    resumed = optimise(request(5), full_model, history=short.history,
+                       counter=RunCounter(full_runs=short.history[-1]['n_full_runs']),
+                       **checking)
+    straight = optimise(request(5), full_model, **checking)
+    np.testing.assert_array_equal(resumed.x_best, straight.x_best)
+    assert resumed.n_full_runs == straight.n_full_runs
