@@ -11,9 +11,11 @@ What it runs from the 6 benchmark starts (``method_benchmark.benchmark_starts(8)
 'baseline', 'centre' and 4 seeded Latin-hypercube points), on the fixed-step model and,
 with ``--noisy``, on the noisy variable-step one:
 
-* ours: Dynamic-Q with eq. 25-scaled simplified gradients and the correction, after one
-  calibration of 16 full-model samples (the maximin Latin hypercube: the 2^8 corners do
-  not fit) shared by the starts;
+* ours: Dynamic-Q with simplified gradients and the correction, after the calibration a
+  tuning goal spends by default, shared by the starts (config/simplified_models.yaml
+  ``scaling.run_samples``: none for 2 and 4 variables, unit scaling; 16 full-model
+  samples for 8, the maximin Latin hypercube: the 2^8 corners do not fit;
+  ``--calibration-samples N`` for N);
 * the peers of ``--peers`` (default COBYLA; ``all``: COBYLA, COBYQA, NOMAD, Optuna TPE),
   each with a budget of 300 full runs, stopping at its first solved design.
 
@@ -45,7 +47,11 @@ from pathlib import Path
 
 import numpy as np
 
-from suspension_tuning.optim.simplified_gradient import SimplifiedGradient, calibrate
+from suspension_tuning.optim.simplified_gradient import (
+    SimplifiedGradient,
+    calibrate,
+    run_calibration_samples,
+)
 from suspension_tuning.studies import common
 from suspension_tuning.studies import method_benchmark as mb
 from suspension_tuning.studies.peers import PEERS, install_study_extra
@@ -79,14 +85,21 @@ def write_reference() -> None:
 
 
 def run_case(n_vars: int, integrator: str, peers: tuple[str, ...], jobs: int,
-             log=None) -> dict:
-    """Ours and ``peers`` from the 6 starts of the n-variable ride, judged."""
+             log=None, samples: int = -1) -> dict:
+    """Ours and ``peers`` from the 6 starts of the n-variable ride, judged.
+
+    ``samples``: ours' eq. 25 calibration samples; -1: what a tuning goal spends
+    (config/simplified_models.yaml ``scaling.run_samples``: none for 2 and 4 variables,
+    ``scaling.n_samples`` 16 for 8), 0: none (unit scaling).
+    """
     reference = mb.reference_for(SCENARIO, n_vars)
     starts = mb.benchmark_starts(n_vars)
     judge = mb.FixedStepJudge(SCENARIO, n_vars)
     t0 = time.perf_counter()
-    scaling = calibrate(SCENARIO, n_vars, n_samples=mb.CALIBRATION_SAMPLES,
-                        run_full=lambda sc, x: run_scenario(sc, x, integrator=integrator))
+    n_samples = run_calibration_samples(SCENARIO, n_vars, samples)
+    scaling = calibrate(SCENARIO, n_vars, n_samples=n_samples,
+                        run_full=lambda sc, x: run_scenario(sc, x, integrator=integrator)
+                        ) if n_samples else None
     cal_wall = time.perf_counter() - t0
     gradient = SimplifiedGradient(SCENARIO, n_vars, scaling, common.FD_STEP)
     results = {'dq_simplified': mb.run_starts('dq_simplified', SCENARIO, n_vars, reference,
@@ -97,10 +110,12 @@ def run_case(n_vars: int, integrator: str, peers: tuple[str, ...], jobs: int,
                                       starts, log=log, stop_when_solved=True)
     summaries = {m: mb.summary(rs) for m, rs in results.items()}
     ours = summaries['dq_simplified']['median_full_runs']
-    figures = mb.peer_figures(results, ours, mb.CALIBRATION_SAMPLES)
+    figures = mb.peer_figures(results, ours, n_samples)
     return {'reference': reference, 'results': results, 'summaries': summaries,
             'peers': figures, 'calibration_wall_s': cal_wall, 'starts': starts,
-            'scaling_r2': {k: v['r2'] for k, v in scaling.summary().items()}}
+            'calibration_runs': n_samples,
+            'scaling_r2': {k: v['r2'] for k, v in scaling.summary().items()}
+            if scaling is not None else {}}
 
 
 def print_ride8(out: dict, suffix: str) -> None:
@@ -115,13 +130,14 @@ def print_ride8(out: dict, suffix: str) -> None:
     p = out['peers']
     ours = s['median_full_runs']
     print(f'ride8_calibration_r2{suffix}: '
-          + ', '.join(f'{k} {v:.3f}' for k, v in out['scaling_r2'].items()))
+          + (', '.join(f'{k} {v:.3f}' for k, v in out['scaling_r2'].items())
+             or 'none (unit scaling)'))
     print(f'ride8_starts_solved{suffix}: {s["starts_solved"]} of {len(out["starts"])}')
     print(f'ride8_median_gap_pct{suffix}: {s["median_gap_pct"]:.3f}')
     print(f'ride8_max_gap_pct{suffix}: {s["max_gap_pct"]:.3f}')
     print(f'ride8_median_full_runs{suffix}: {runs(ours)}')
-    print(f'ride8_calibration_runs{suffix}: {mb.CALIBRATION_SAMPLES}')
-    print(f'ride8_paid_full_runs{suffix}: {runs(ours + mb.CALIBRATION_SAMPLES)}')
+    print(f'ride8_calibration_runs{suffix}: {out["calibration_runs"]}')
+    print(f'ride8_paid_full_runs{suffix}: {runs(ours + out["calibration_runs"])}')
     for peer, median in p['peer_medians'].items():
         m = out['summaries'][peer]
         print(f'peer_median_full_runs_{peer}_ride8{suffix}: {runs(median)} '
@@ -146,6 +162,9 @@ def main() -> None:
                         help='sizes of the ratio_by_n lines (default 2 4 8; the ride8 '
                              'lines need 8)')
     parser.add_argument('--jobs', type=int, default=1, help='(reserved) worker processes')
+    parser.add_argument('--calibration-samples', type=int, default=-1, metavar='N',
+                        help="ours' eq. 25 samples (0: none; default -1: what a tuning "
+                        'goal spends, config/simplified_models.yaml scaling.run_samples)')
     args = parser.parse_args()
     if args.write_reference:
         write_reference()
@@ -159,7 +178,8 @@ def main() -> None:
     print(f'ride8_peers: {",".join(peers)}')
     cases = {}
     for n in sorted(set(args.ratio_n)):
-        cases[n] = run_case(n, mb.REFERENCE_INTEGRATOR, peers, args.jobs)
+        cases[n] = run_case(n, mb.REFERENCE_INTEGRATOR, peers, args.jobs,
+                            samples=args.calibration_samples)
         print(f'ride{n}_reference_f: {cases[n]["reference"].f:.6f}', flush=True)
     if N_VARS in cases:
         print_ride8(cases[N_VARS], '')
@@ -169,12 +189,14 @@ def main() -> None:
         ours = out['summaries']['dq_simplified']['median_full_runs']
         print(f'ratio_by_n: n {n}, ours_median_full_runs {runs(ours)}, ours_solved '
               f'{out["summaries"]["dq_simplified"]["starts_solved"]}, best_peer '
-              f'{p["best_peer"]} {runs(p["peer_best_full_runs"])}, ratio '
+              f'{p["best_peer"]} {runs(p["peer_best_full_runs"])}, calibration_runs '
+              f'{out["calibration_runs"]}, ratio '
               f'{p["full_runs_ratio_vs_best_peer"]:.2f}, paid_ratio '
               f'{p["full_runs_ratio_vs_best_peer_with_calibration"]:.2f}')
     print(f'bench_ride8_fixed_step_wall_s: {time.perf_counter() - t0:.1f}', flush=True)
     if args.noisy:
-        print_ride8(run_case(N_VARS, NOISY, peers, args.jobs), '_noisy')
+        print_ride8(run_case(N_VARS, NOISY, peers, args.jobs,
+                             samples=args.calibration_samples), '_noisy')
     print(f'bench_ride8_wall_s: {time.perf_counter() - t0:.1f}')
 
 
