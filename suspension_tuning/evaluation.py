@@ -237,31 +237,26 @@ def in_process_condition_gradients(conditions: Any, n_vars: int,
     directory = Path(cache_dir) if cache_dir else (
         Path.home() / '.cache' / 'suspension_tuning' / 'calibration')
     out: dict[str, Any] = {}
-    if n_samples == 0:  # none: unit scaling, the run's correction maps the slopes
-        for condition in getattr(conditions, 'conditions', conditions):
-            gradient = SimplifiedGradient(scenario, n_vars, None,
-                                          condition=condition.as_text())
-            gradient.calibration_runs = 0
-            out[condition.name] = gradient
-        return out
-    n_samples, seed = calibration_settings(n_samples)
+    # 0: none, unit scaling (the run's correction maps the slopes)
+    n_samples, seed = calibration_settings(n_samples) if n_samples != 0 else (0, None)
     for condition in getattr(conditions, 'conditions', conditions):
         text = condition.as_text()
-        key = scaling_key(scenario, n_vars, n_samples, seed)
-        key['condition'] = text
-        digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
-        path = directory / f'condition_{scenario}_{n_vars}var_{digest}.json'
         scaling, runs = None, 0
-        if path.exists():
-            try:
-                scaling = Scaling.load(path, expected_key=key)
-            except ValueError:
-                scaling = None
-        if scaling is None:
-            scaling = calibrate(scenario, n_vars, n_samples, seed, condition=text)
-            runs = n_samples
-            path.parent.mkdir(parents=True, exist_ok=True)
-            scaling.save(path)
+        if n_samples:
+            key = scaling_key(scenario, n_vars, n_samples, seed)
+            key['condition'] = text
+            digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
+            path = directory / f'condition_{scenario}_{n_vars}var_{digest}.json'
+            if path.exists():
+                try:
+                    scaling = Scaling.load(path, expected_key=key)
+                except ValueError:
+                    scaling = None
+            if scaling is None:
+                scaling = calibrate(scenario, n_vars, n_samples, seed, condition=text)
+                runs = n_samples
+                path.parent.mkdir(parents=True, exist_ok=True)
+                scaling.save(path)
         gradient = SimplifiedGradient(scenario, n_vars, scaling, condition=text)
         gradient.calibration_runs = runs
         out[condition.name] = gradient

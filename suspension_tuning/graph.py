@@ -28,6 +28,7 @@ from rclpy.parameter import Parameter
 from suspension_tuning.nodes._spin import (
     SpinningGraph,
     end_rclpy,
+    made_or_stopped,
     settle_signal,
 )
 
@@ -148,25 +149,16 @@ def main(argv: list[str] | None = None) -> None:
     from suspension_tuning.nodes._parameters import ParameterError
     if not require_unique('graph', check):
         return  # Ctrl-C or SIGTERM during the check: nothing was started
-    try:
-        live = ([] if args.telemetry_rate is None
-                else [Parameter('telemetry_rate', value=args.telemetry_rate)])
-        nodes = build_nodes(args.workers, not args.no_record,
-                            overrides={name: live for name in worker_names(args.workers)})
-    except (FmuConfigError, MappingError, ParameterError, ConfigError) as error:
-        # As the node alone says it (full_vehicle_sim's main): one line, exit code 2.
-        rclpy.try_shutdown()
-        print(f'{getattr(error, "node_name", "graph")}: not started: {error}', file=sys.stderr)
-        sys.exit(2)
-    except KeyboardInterrupt:  # Ctrl-C while the nodes are made: the ones made are gone
-        settle_signal()
-        end_rclpy()
-        return
-    except Exception:
-        if rclpy.ok():
-            raise
-        end_rclpy()
-        return  # SIGTERM while the nodes are made: a node on the shut-down context failed
+    live = ([] if args.telemetry_rate is None
+            else [Parameter('telemetry_rate', value=args.telemetry_rate)])
+    # A set-up error as the node alone says it (full_vehicle_sim's main): one line, exit 2.
+    nodes = made_or_stopped(
+        lambda: build_nodes(args.workers, not args.no_record,
+                            overrides={name: live for name in worker_names(args.workers)}),
+        (FmuConfigError, MappingError, ParameterError, ConfigError),
+        lambda error: getattr(error, 'node_name', 'graph'))
+    if nodes is None:
+        return  # Ctrl-C or SIGTERM while the nodes were made: the ones made are gone
     try:
         graph = SpinningGraph(nodes)
     except KeyboardInterrupt:  # Ctrl-C while the executors start: no goal ran yet

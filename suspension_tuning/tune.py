@@ -607,10 +607,10 @@ def main(argv: list[str] | None = None) -> int:
         road = goal_road(args.road, args.repeat_road)
         conditions = ''
         if args.conditions:
-            from suspension_tuning.conditions import load_conditions
+            from suspension_tuning.conditions import CONDITION_SCENARIOS, load_conditions
 
             conditions = load_conditions(args.conditions).as_text()
-            if args.scenario not in ('ride', 'handling') or args.evaluate or road:
+            if args.scenario not in CONDITION_SCENARIOS or args.evaluate or road:
                 raise ValueError('--conditions: a condition set is for the ride or handling '
                                  'optimisation (no --evaluate or --road: each condition names '
                                  'its road)')

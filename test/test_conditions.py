@@ -137,11 +137,16 @@ def _bowl_set(weight_b=1.0):
     return ConditionSet((Condition('a', 30.0), Condition('b', 50.0, weight=weight_b)), 'test')
 
 
+def _bowl_request(monkeypatch, conditions, form='worst', source='full', **kwargs):
+    """A 2-variable ride request over ``conditions`` (read from the goal's text as set)."""
+    monkeypatch.setattr(ConditionSet, 'from_text', staticmethod(lambda text: conditions))
+    return TuningRequest('ride', 2, gradient_source=source, conditions='set',
+                         condition_form=form, options={'maxiter': 40}, **kwargs)
+
+
 def test_the_worst_case_form_finds_the_minimax_design(monkeypatch):
     conditions = _bowl_set()
-    monkeypatch.setattr(ConditionSet, 'from_text', staticmethod(lambda text: conditions))
-    request = TuningRequest('ride', 2, gradient_source='full', conditions='set',
-                            condition_form='worst', options={'maxiter': 40})
+    request = _bowl_request(monkeypatch, conditions, 'worst')
     result = optimise_conditions(request, _bowl_model)
     # the minimax of two equal bowls lies halfway between their centres, f = |d/2|^2
     half = 0.5 * (CENTRES['a'] + CENTRES['b'])
@@ -159,9 +164,7 @@ def test_the_worst_case_form_finds_the_minimax_design(monkeypatch):
 
 def test_the_weighted_mean_form_finds_the_weighted_centre(monkeypatch):
     conditions = _bowl_set(weight_b=3.0)
-    monkeypatch.setattr(ConditionSet, 'from_text', staticmethod(lambda text: conditions))
-    request = TuningRequest('ride', 2, gradient_source='full', conditions='set',
-                            condition_form='mean', options={'maxiter': 40})
+    request = _bowl_request(monkeypatch, conditions, 'mean')
     result = optimise_conditions(request, _bowl_model)
     # the minimum of 1/4 |x - a|^2 + 3/4 |x - b|^2 is the weighted mean of the centres
     centre = 0.25 * CENTRES['a'] + 0.75 * CENTRES['b']
@@ -183,9 +186,7 @@ def _bowl_model_with_metric(designs, conditions):
 
 def test_an_extra_constraint_on_a_metric_holds_in_every_condition(monkeypatch):
     conditions = _bowl_set()
-    monkeypatch.setattr(ConditionSet, 'from_text', staticmethod(lambda text: conditions))
-    request = TuningRequest('ride', 2, gradient_source='full', conditions='set',
-                            condition_form='worst', options={'maxiter': 40},
+    request = _bowl_request(monkeypatch, conditions, 'worst',
                             constraints=['ride:a_rms_driver_mps2<=0.4'])
     result = optimise_conditions(request, _bowl_model_with_metric)
     # x_1 + 0.1 <= 0.4 binds in condition b: x_1 = 0.3; then b's bowl is the worse one
@@ -204,14 +205,12 @@ def test_an_extra_constraint_on_a_metric_holds_in_every_condition(monkeypatch):
 
 def test_an_extra_constraint_on_the_objective_takes_the_simplified_gradient(monkeypatch):
     conditions = _bowl_set(weight_b=3.0)
-    monkeypatch.setattr(ConditionSet, 'from_text', staticmethod(lambda text: conditions))
 
     def exact(name):  # the bowls' own gradient stands in for a scaled simplified one
         return lambda x, _inputs: (2.0 * (np.asarray(x) - CENTRES[name]), np.zeros((4, 2)),
                                    None)
 
-    request = TuningRequest('ride', 2, gradient_source='simplified', conditions='set',
-                            condition_form='mean', options={'maxiter': 40},
+    request = _bowl_request(monkeypatch, conditions, 'mean', 'simplified',
                             constraints=['ride:f_ride<=0.16'])
     result = optimise_conditions(request, _bowl_model,
                                  {name: exact(name) for name in ('a', 'b')})
@@ -300,9 +299,7 @@ def test_the_answer_over_a_set_is_checked_at_the_tighter_tolerance_in_every_cond
     from suspension_tuning.tuning import check_summary
 
     conditions = _bowl_set()
-    monkeypatch.setattr(ConditionSet, 'from_text', staticmethod(lambda text: conditions))
-    request = TuningRequest('ride', 2, gradient_source='full', conditions='set',
-                            condition_form='worst', options={'maxiter': 40})
+    request = _bowl_request(monkeypatch, conditions, 'worst')
 
     def tighter(designs, conditions):  # a check that finds condition b's g 0.5 higher
         out = _bowl_model(designs, conditions)
@@ -327,9 +324,7 @@ def test_the_answer_over_a_set_is_checked_at_the_tighter_tolerance_in_every_cond
 def test_an_answer_infeasible_at_the_check_is_continued_with_shifted_constraints(
         monkeypatch):
     conditions = _bowl_set()
-    monkeypatch.setattr(ConditionSet, 'from_text', staticmethod(lambda text: conditions))
-    request = TuningRequest('ride', 2, gradient_source='full', conditions='set',
-                            condition_form='worst', options={'maxiter': 40})
+    request = _bowl_request(monkeypatch, conditions, 'worst')
 
     def limited(offset):
         """The bowls with x_1 <= 0.5 - offset in condition b (each tyre-hop row)."""

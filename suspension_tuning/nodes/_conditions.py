@@ -79,7 +79,7 @@ def condition_model(node: Any, request: TuningRequest):
         # one design: each condition's run is a piece (a response) of its own, in order
         first = [r.inputs[0] if inputs and len(r.inputs) else None for r in responses]
         return [FullEvaluation(f=f[c * m:(c + 1) * m], g=g[c * m:(c + 1) * m],
-                               inputs=first[c] if inputs else None,
+                               inputs=first[c],
                                metric_names=names, metrics=metrics[c * m:(c + 1) * m])
                 for c in range(len(texts))]
 

@@ -53,15 +53,12 @@ class PauseWatch:
     renewal_due : threading.Event
         Set after a pause when ``renew`` is on: the node's ``run_node`` loop then
         destroys the node and its context and makes both again.
-    last_gap_s : float
-        The longest gap seen, s.
     """
 
     def __init__(self, node: Node, renew: bool = False) -> None:
         self.node = node
         self.renew = renew
         self.renewal_due = threading.Event()
-        self.last_gap_s = 0.0
         self.last_look = time.monotonic()
         self._lock = threading.Lock()
         node.create_timer(LOOK_PERIOD_S, self._look,
@@ -87,7 +84,6 @@ class PauseWatch:
         with self._lock:
             now = time.monotonic()
             gap, self.last_look = now - self.last_look, now
-            self.last_gap_s = max(self.last_gap_s, gap)
             if gap <= PAUSE_S or self.renewal_due.is_set():
                 return
             if self.renew:

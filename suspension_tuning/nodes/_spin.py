@@ -251,6 +251,32 @@ def kept_parameters(node: Node, saved: list[Any]) -> list[str]:
     return done
 
 
+def made_or_stopped(make: Callable[[], Any], errors: tuple[type[Exception], ...],
+                    who: Callable[[Exception], str]) -> Any:
+    """``make()`` (nodes, after ``rclpy.init``), or None when a signal stopped it.
+
+    An error of ``errors`` (a parameter, configuration or FMU set-up that cannot be used)
+    ends the process with one line, ``<who(error)>: not started: <error>``, and exit
+    code 2.  Ctrl-C or SIGTERM while it runs (the nodes made are then gone with the
+    shut-down context) ends rclpy and returns None.
+    """
+    try:
+        return make()
+    except errors as error:
+        rclpy.try_shutdown()
+        print(f'{who(error)}: not started: {error}', file=sys.stderr)
+        sys.exit(2)
+    except KeyboardInterrupt:  # Ctrl-C while they are made
+        settle_signal()
+        end_rclpy()
+        return None
+    except Exception:
+        if rclpy.ok():
+            raise
+        end_rclpy()  # SIGTERM while they are made: one failed on the shut-down context
+        return None
+
+
 def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
              name: str | None = None, rename: bool = False,
              renew_after_pause: bool = False) -> None:
@@ -295,23 +321,16 @@ def run_node(make_node: Callable[[], Node], args: list[str] | None = None, *,
     if name is not None and not require_unique(name, start_check(name, [name]), rename):
         return  # Ctrl-C or SIGTERM during the check
     kept: list[Any] = []  # parameters set while the node ran, for its renewal
+    def made() -> Node:
+        node = make_node()
+        if kept:
+            kept_parameters(node, kept)
+        return node
+
     while True:
-        try:
-            node = make_node()
-            if kept:
-                kept_parameters(node, kept)
-        except (ParameterError, ConfigError) as error:
-            rclpy.try_shutdown()
-            print(f'{name or "node"}: not started: {error}', file=sys.stderr)
-            sys.exit(2)
-        except KeyboardInterrupt:  # Ctrl-C while the node is made
-            settle_signal()
-            end_rclpy()
-            return
-        except Exception:
-            if rclpy.ok():
-                raise
-            end_rclpy()  # SIGTERM while the node is made: it failed on the shut-down context
+        node = made_or_stopped(made, (ParameterError, ConfigError),
+                               lambda _error: name or 'node')
+        if node is None:
             return
         watch = getattr(node, 'pause_watch', None) if renew_after_pause else None
         if watch is not None:
