@@ -531,6 +531,7 @@ def _drive(opt: DynamicQ, request: TuningRequest, terms: _ConstraintTerms,
     """
     n = request.n_vars
     cancelled = False
+    verified: dict[tuple[int, int], tuple[Array, float, Array, Array]] = {}
     while (ask := opt.ask()) is not None:
         kind, x = ask
         try:
@@ -557,7 +558,12 @@ def _drive(opt: DynamicQ, request: TuningRequest, terms: _ConstraintTerms,
                                                np.vstack([df, dg]),
                                                correction_options.seed_step, upper)
                     corrections[0].observe(x, full, values)
-                    jac = corrections[0].correct(np.vstack([df, dg]))
+                    raw = np.vstack([df, dg])
+                    jac = corrections[0].correct(raw)
+                    if correction_options.verify_bounds and verify_bounds(
+                            corrections[0], terms, x, full, values, raw, jac,
+                            correction_options.seed_step, lower, upper, verified):
+                        jac = corrections[0].correct(raw)
                     df, dg = jac[0], jac[1:]
                 record = opt.tell((df, dg, None), source='simplified')
         except RunCancelled:
@@ -747,6 +753,55 @@ def seed_blind_columns(correction: SecantCorrection, terms: _ConstraintTerms, x:
     stepped = terms.stacked_values(points)
     for row, (j, h) in enumerate(zip(blind, steps)):
         correction.seed_column(int(j), x, float(h), full, stepped[row], values)
+
+
+def verify_bounds(correction: SecantCorrection, terms: _ConstraintTerms, x: Array,
+                  full: Array, values: Array, raw: Array, corrected: Array, step: float,
+                  lower: Array, upper: Array,
+                  verified: dict[tuple[int, int], tuple[Array, float, Array, Array]]
+                  ) -> bool:
+    """Check with a full run each bound that the correction alone decides.
+
+    A variable on a bound whose simplified objective slope points inward while the
+    corrected one points outward (the correction reversed it) gets one full run at
+    ``x + step`` inward, which sets its correction column from the full model
+    (:mod:`suspension_tuning.optim.correction` module notes).  ``verified`` keeps each
+    variable's and bound's last check (design, step, full values at both ends): less
+    than ``step`` from there, the column is set again from it without a new run (the
+    secant updates of later steps may have reversed it again).  The new runs are
+    counted as full runs of the optimisation.
+
+    Returns
+    -------
+    bool
+        Whether a column was set (the corrected Jacobian is then to be rebuilt).
+    """
+    tol = 1e-9
+    flips = []
+    for j in range(x.size):
+        if x[j] <= lower[j] + tol and raw[0, j] < 0.0 < corrected[0, j]:
+            flips.append((j, 1))
+        elif x[j] >= upper[j] - tol and raw[0, j] > 0.0 > corrected[0, j]:
+            flips.append((j, -1))
+    if not flips:
+        return False
+    known = [key for key in flips if key in verified
+             and np.linalg.norm(x - verified[key][0]) < step]
+    new = [key for key in flips if key not in known]
+    for j, side in known:
+        x_v, h, full_v, stepped_v = verified[j, side]
+        correction.seed_column(j, x, h, full_v, stepped_v, values, raw[:, j])
+    if new:
+        points = np.repeat(x[None, :], len(new), axis=0)
+        steps = [side * min(step, float(upper[j] - lower[j])) for j, side in new]
+        for row, ((j, _), h) in enumerate(zip(new, steps)):
+            points[row, j] += h
+        stepped = terms.stacked_values(points)
+        for row, ((j, side), h) in enumerate(zip(new, steps)):
+            correction.seed_column(j, x, h, full, stepped[row], values, raw[:, j])
+            verified[j, side] = (x.copy(), h, np.asarray(full, float).copy(),
+                                 np.asarray(stepped[row], float).copy())
+    return True
 
 
 class _ConstraintTerms:

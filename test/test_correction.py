@@ -11,7 +11,7 @@ from suspension_tuning.optim.correction import (
     SecantCorrection,
     load_correction_options,
 )
-from suspension_tuning.tuning import FullEvaluation, TuningRequest, optimise
+from suspension_tuning.tuning import FullEvaluation, TuningRequest, optimise, verify_bounds
 from suspension_tuning.vehicle.metrics import soft_tyre_hop_constraints, tyre_hop_constraints
 from suspension_tuning.vehicle.simplified import run_simplified
 
@@ -178,3 +178,65 @@ def test_a_variable_the_simplified_model_cannot_see_is_seeded_and_then_moves():
     assert runs[False].x_best[1] == pytest.approx(0.2)  # never moved
     # the seed's one full run (x1 + 0.1, seed_step) is counted
     assert runs[True].n_full_runs == runs[True].nfev + 1
+
+
+class _Probes:
+    """Full-model values f = (x0 - 0.7)^2 + x1, g = -1 of stepped designs, counted."""
+
+    def __init__(self):
+        self.runs = 0
+
+    def stacked_values(self, points):
+        points = np.atleast_2d(points)
+        self.runs += len(points)
+        return np.column_stack([(points[:, 0] - 0.7) ** 2 + points[:, 1],
+                                -np.ones(len(points))])
+
+
+def test_a_bound_the_correction_alone_decides_is_checked_with_one_full_run():
+    # x0 sits on its lower bound 0.001.  The simplified slope of f along x0 points inward
+    # (-1.0), the full model's too (2 (0.001 - 0.7) = -1.398), but a stale secant column
+    # (+1.5) reverses it: the corrected slope +0.5 would make the bound look optimal.
+    # One full run at x0 + 0.1 sets the column to the one-sided full difference
+    # ((0.101 - 0.7)^2 - (0.001 - 0.7)^2) / 0.1 = -1.298 minus the simplified -1.0.
+    x = np.array([0.001, 0.5])
+    lower, upper = np.full(2, 0.001), np.ones(2)
+    probes = _Probes()
+    full = probes.stacked_values(x)[0]
+    probes.runs = 0
+    values = np.array([0.3, np.nan])  # g has no simplified model
+    raw = np.array([[-1.0, 1.0], [0.0, 0.0]])
+    corr = SecantCorrection(2, 2)
+    corr.jacobian[0, 0] = 1.5
+    verified = {}
+    assert verify_bounds(corr, probes, x, full, values, raw, corr.correct(raw), 0.1,
+                         lower, upper, verified)
+    assert probes.runs == 1 and corr.seeded == [0]
+    slope = ((0.101 - 0.7) ** 2 - (0.001 - 0.7) ** 2) / 0.1
+    assert corr.correct(raw)[0, 0] == pytest.approx(slope)
+    assert corr.jacobian[1, 0] == 0.0  # the row without a simplified model stays exact
+    # a later secant reverses it again at the same design: set again, no new run
+    corr.jacobian[0, 0] = 1.5
+    assert verify_bounds(corr, probes, x, full, values, raw, corr.correct(raw), 0.1,
+                         lower, upper, verified)
+    assert probes.runs == 1 and corr.correct(raw)[0, 0] == pytest.approx(slope)
+    # a slope the correction does not reverse, or an interior variable: no run
+    assert not verify_bounds(corr, probes, x, full, values, raw, corr.correct(raw), 0.1,
+                             lower, upper, verified)
+    inner = np.array([0.3, 0.5])
+    corr.jacobian[0, 0] = 1.5
+    assert not verify_bounds(corr, probes, inner, full, values, raw, corr.correct(raw),
+                             0.1, lower, upper, verified)
+    assert probes.runs == 1
+    # the same bound a seed step or more from the last check: checked again
+    far = np.array([0.001, 0.35])
+    assert verify_bounds(corr, probes, far, probes.stacked_values(far)[0], values, raw,
+                         corr.correct(raw), 0.1, lower, upper, verified)
+    assert probes.runs == 3  # the design's own run above, and the check's
+
+
+def test_seeding_a_column_subtracts_the_simplified_slope():
+    corr = SecantCorrection(2, 2)
+    corr.seed_column(1, [0.5, 0.5], -0.1, [1.0, 2.0], [1.2, 2.0], [0.0, 0.0], [0.5, -3.0])
+    # (1.2 - 1.0) / -0.1 - 0.5 = -2.5; (2.0 - 2.0) / -0.1 + 3.0 = 3.0
+    np.testing.assert_allclose(corr.jacobian[:, 1], [-2.5, 3.0])
