@@ -1,11 +1,14 @@
-"""Benchmark of the 8-variable ride (preset ride8): full runs of ours against the peers.
+"""Benchmark of the 8-variable ride and handling (preset ride8): ours against the peers.
 
-The case: the ride scenario (eq. 9 with the eq. 11 tyre-hop constraints) on the
-``ride8`` preset of config/design_space.yaml (the compression and rebound scale factors
-of the damper table and the static gas volume per axle, and both anti-roll bars;
-docs/design_space.md).  The pitch-plane model that gives our gradients sees the split
-damper and the gas volumes, not the bars: their columns are seeded with one full run
-each and then learnt by the secant correction (optim/correction.py).
+The case: the ride scenario (eq. 9 with the eq. 11 tyre-hop constraints; default) or,
+with ``--scenario handling``, the handling one (eq. 10 with the eq. 11 constraints) on
+the 8-variable preset of config/design_space.yaml (``ride8``: the compression and
+rebound scale factors of the damper table and the static gas volume per axle, and both
+anti-roll bars; docs/design_space.md).  The pitch-plane model that gives the ride's
+gradients sees the split damper and the gas volumes, not the bars: their columns are
+seeded with one full run each and then learnt by the secant correction
+(optim/correction.py).  The handling model sees all 8 (the bars in eq. 14's roll
+moment).  Lines are prefixed ``ride8_`` or ``handling8_``.
 
 What it runs from the 6 benchmark starts (``method_benchmark.benchmark_starts(8)``:
 'baseline', 'centre' and 4 seeded Latin-hypercube points), on the fixed-step model and,
@@ -28,14 +31,15 @@ full runs to solve over ours; ``..._paid``: over ours plus the calibration.
 ``ratio_by_n``: the same ratio against COBYLA (and the other peers run) for the ride
 with n = 2, 4 and 8 variables (``--ratio-n``), each against its reference.
 
-The reference of ride8 is in benchmarks/references.json (case ``ride_8var``), written
-by ``.venv/bin/python benchmarks/bench_ride8.py --write-reference`` (the method study's
+The references are in benchmarks/references.json (cases ``ride_8var`` and
+``handling_8var``), written by ``.venv/bin/python benchmarks/bench_ride8.py
+--write-reference [--scenario handling]`` (the method study's
 search: a 3^8 grid, then SLSQP polish from its best points and from the designs
 Dynamic-Q with full and with simplified gradients reaches from the 6 starts; best
 feasible point seen, max g <= 1e-3).
 
-Run: .venv/bin/python benchmarks/bench_ride8.py [--peers cobyla|all] [--noisy]
-[--ratio-n 2 4 8] [--jobs N]
+Run: .venv/bin/python benchmarks/bench_ride8.py [--scenario ride|handling]
+[--peers cobyla|all] [--noisy] [--ratio-n 2 4 8] [--jobs N]
 """
 
 from __future__ import annotations
@@ -54,11 +58,12 @@ from suspension_tuning.optim.simplified_gradient import (
 )
 from suspension_tuning.studies import common
 from suspension_tuning.studies import method_benchmark as mb
-from suspension_tuning.studies.peers import PEERS, install_study_extra
+from suspension_tuning.studies.peer_study import SHORT, data_profile
+from suspension_tuning.studies.peers import PEER_BUDGET, PEERS, install_study_extra
 from suspension_tuning.vehicle.design import load_design_space
 from suspension_tuning.vehicle.scenarios import run_scenario
 
-SCENARIO = 'ride'
+SCENARIOS = ('ride', 'handling')
 N_VARS = 8
 NOISY = 'variable_step'
 REFERENCES = Path(__file__).resolve().parent / 'references.json'
@@ -71,103 +76,195 @@ def runs(value: float) -> str:
     return 'inf' if math.isinf(value) else f'{value:g}'
 
 
-def write_reference() -> None:
-    """Search the ride8 reference and write it into benchmarks/references.json."""
+def write_reference(scenario: str) -> None:
+    """Search the 8-variable reference of ``scenario``; write it to references.json."""
     t0 = time.perf_counter()
-    ref = mb.search_reference(SCENARIO, N_VARS, grid_points=GRID_POINTS,
+    ref = mb.search_reference(scenario, N_VARS, grid_points=GRID_POINTS,
                               log=lambda s: print(s, flush=True))
-    ref.search['command'] = COMMAND
+    ref.search['command'] = COMMAND + ('' if scenario == 'ride' else f' --scenario {scenario}')
     status = mb.write_references(REFERENCES, [ref])
-    print(f'ride8_reference_f: {ref.f:.6f}')
-    print(f'ride8_reference_x: {np.round(ref.x, 4).tolist()}')
-    print(f'ride8_reference_status: {status}')
-    print(f'ride8_reference_wall_s: {time.perf_counter() - t0:.1f}')
+    case = f'{scenario}{N_VARS}'
+    print(f'{case}_reference_f: {ref.f:.6f}')
+    print(f'{case}_reference_x: {np.round(ref.x, 4).tolist()}')
+    print(f'{case}_reference_status: {status}')
+    print(f'{case}_reference_wall_s: {time.perf_counter() - t0:.1f}')
 
 
-def run_case(n_vars: int, integrator: str, peers: tuple[str, ...], jobs: int,
-             log=None, samples: int = -1) -> dict:
-    """Ours and ``peers`` from the 6 starts of the n-variable ride, judged.
+def run_case(scenario: str, n_vars: int, integrator: str, peers: tuple[str, ...],
+             jobs: int, log=None, samples: int = -1) -> dict:
+    """Ours and ``peers`` from the 6 starts of the n-variable case, judged.
 
     ``samples``: ours' eq. 25 calibration samples; -1: what a tuning goal spends
-    (config/simplified_models.yaml ``scaling.run_samples``: none for 2 and 4 variables,
-    ``scaling.n_samples`` 16 for 8), 0: none (unit scaling).
+    (config/simplified_models.yaml ``scaling.run_samples``), 0: none (unit scaling).
     """
-    reference = mb.reference_for(SCENARIO, n_vars)
+    reference = mb.reference_for(scenario, n_vars)
     starts = mb.benchmark_starts(n_vars)
-    judge = mb.FixedStepJudge(SCENARIO, n_vars)
+    judge = mb.FixedStepJudge(scenario, n_vars)
     t0 = time.perf_counter()
-    n_samples = run_calibration_samples(SCENARIO, n_vars, samples)
-    scaling = calibrate(SCENARIO, n_vars, n_samples=n_samples,
+    n_samples = run_calibration_samples(scenario, n_vars, samples)
+    scaling = calibrate(scenario, n_vars, n_samples=n_samples,
                         run_full=lambda sc, x: run_scenario(sc, x, integrator=integrator)
                         ) if n_samples else None
     cal_wall = time.perf_counter() - t0
-    gradient = SimplifiedGradient(SCENARIO, n_vars, scaling, common.FD_STEP)
-    results = {'dq_simplified': mb.run_starts('dq_simplified', SCENARIO, n_vars, reference,
+    gradient = SimplifiedGradient(scenario, n_vars, scaling, common.FD_STEP)
+    results = {'dq_simplified': mb.run_starts('dq_simplified', scenario, n_vars, reference,
                                               integrator, judge, starts, gradient=gradient,
                                               log=log)}
     for peer in peers:
-        results[peer] = mb.run_starts(peer, SCENARIO, n_vars, reference, integrator, judge,
+        results[peer] = mb.run_starts(peer, scenario, n_vars, reference, integrator, judge,
                                       starts, log=log, stop_when_solved=True)
     summaries = {m: mb.summary(rs) for m, rs in results.items()}
     ours = summaries['dq_simplified']['median_full_runs']
     figures = mb.peer_figures(results, ours, n_samples)
-    return {'reference': reference, 'results': results, 'summaries': summaries,
+    return {'scenario': scenario, 'n_vars': n_vars, 'integrator': integrator,
+            'budget': PEER_BUDGET,
+            'reference': reference, 'results': results, 'summaries': summaries,
             'peers': figures, 'calibration_wall_s': cal_wall, 'starts': starts,
             'calibration_runs': n_samples,
             'scaling_r2': {k: v['r2'] for k, v in scaling.summary().items()}
             if scaling is not None else {}}
 
 
-def print_ride8(out: dict, suffix: str) -> None:
+def ratio_text(ratio: float, ours: float, peers: dict) -> str:
+    """A ratio, or 'none' with the reason when neither ours nor any peer solves."""
+    if math.isinf(ours) and math.isinf(peers['peer_best_full_runs']):
+        return 'none (neither ours nor a peer solves the median start)'
+    return f'{ratio:.2f}'
+
+
+def print_case(scenario: str, out: dict, suffix: str) -> None:
+    """The 8-variable lines of one case (``suffix``: '' or '_noisy')."""
+    case = f'{scenario}{N_VARS}'
     names = load_design_space().names(N_VARS)
     for r in out['results']['dq_simplified']:
         values = load_design_space().physical_values(r.x)
-        print(f'ride8_start_{r.start}{suffix}: gap_pct {r.gap_pct:+.3f}, max_violation '
+        print(f'{case}_start_{r.start}{suffix}: gap_pct {r.gap_pct:+.3f}, max_violation '
               f'{r.max_violation:.3g}, full_runs_to_solve {runs(r.full_runs_to_solve)}, '
               f'full_runs {r.full_runs}, design '
               + ' '.join(f'{n}={values[n]:.4g}' for n in names))
     s = out['summaries']['dq_simplified']
     p = out['peers']
     ours = s['median_full_runs']
-    print(f'ride8_calibration_r2{suffix}: '
+    print(f'{case}_calibration_r2{suffix}: '
           + (', '.join(f'{k} {v:.3f}' for k, v in out['scaling_r2'].items())
              or 'none (unit scaling)'))
-    print(f'ride8_starts_solved{suffix}: {s["starts_solved"]} of {len(out["starts"])}')
-    print(f'ride8_median_gap_pct{suffix}: {s["median_gap_pct"]:.3f}')
-    print(f'ride8_max_gap_pct{suffix}: {s["max_gap_pct"]:.3f}')
-    print(f'ride8_median_full_runs{suffix}: {runs(ours)}')
-    print(f'ride8_calibration_runs{suffix}: {out["calibration_runs"]}')
-    print(f'ride8_paid_full_runs{suffix}: {runs(ours + out["calibration_runs"])}')
+    print(f'{case}_starts_solved{suffix}: {s["starts_solved"]} of {len(out["starts"])}')
+    print(f'{case}_median_gap_pct{suffix}: {s["median_gap_pct"]:.3f}')
+    print(f'{case}_max_gap_pct{suffix}: {s["max_gap_pct"]:.3f}')
+    print(f'{case}_median_full_runs{suffix}: {runs(ours)}')
+    print(f'{case}_calibration_runs{suffix}: {out["calibration_runs"]}')
+    print(f'{case}_paid_full_runs{suffix}: {runs(ours + out["calibration_runs"])}')
     for peer, median in p['peer_medians'].items():
         m = out['summaries'][peer]
-        print(f'peer_median_full_runs_{peer}_ride8{suffix}: {runs(median)} '
+        print(f'peer_median_full_runs_{peer}_{case}{suffix}: {runs(median)} '
               f'({m["starts_solved"]} of {len(out["starts"])} solved)')
-    print(f'peer_best_ride8{suffix}: {p["best_peer"]}')
-    print(f'peer_best_full_runs_ride8{suffix}: {runs(p["peer_best_full_runs"])}')
-    print(f'full_runs_ratio_vs_best_peer_ride8{suffix}: '
-          f'{p["full_runs_ratio_vs_best_peer"]:.2f}')
-    print(f'full_runs_ratio_vs_best_peer_ride8_paid{suffix}: '
-          f'{p["full_runs_ratio_vs_best_peer_with_calibration"]:.2f}')
+    print(f'peer_best_{case}{suffix}: {p["best_peer"]}')
+    print(f'peer_best_full_runs_{case}{suffix}: {runs(p["peer_best_full_runs"])}')
+    print(f'full_runs_ratio_vs_best_peer_{case}{suffix}: '
+          f'{ratio_text(p["full_runs_ratio_vs_best_peer"], ours, p)}')
+    print(f'full_runs_ratio_vs_best_peer_{case}_paid{suffix}: '
+          f'{ratio_text(p["full_runs_ratio_vs_best_peer_with_calibration"], ours, p)}')
+    for tau in mb.LOOSE_GAPS_PCT:
+        medians = {m: float(np.median([r.full_runs_to_gap[tau] for r in rs]))
+                   for m, rs in out['results'].items()}
+        reached = {m: sum(math.isfinite(r.full_runs_to_gap[tau]) for r in rs)
+                   for m, rs in out['results'].items()}
+        ours = medians.pop('dq_simplified')
+        best = min(medians, key=medians.get) if medians else ''
+        ratio = (medians[best] / ours if best and math.isfinite(ours) else math.nan)
+        print(f'{case}_median_full_runs_within_{tau:g}pct{suffix}: ours {runs(ours)} '
+              f'({reached["dq_simplified"]} of {len(out["starts"])}), '
+              + ', '.join(f'{m} {runs(v)} ({reached[m]} of {len(out["starts"])})'
+                          for m, v in medians.items())
+              + f'; ratio vs best peer {ratio:.2f}')
+
+
+def plot_by_n(scenario: str, cases: dict[int, dict], path: Path) -> Path:
+    """Full runs against n (fixed-step model): the medians, and the ratio to the best peer.
+
+    Left: median full runs to solve, ours without and with its calibration (dashed) and
+    every peer; a method whose median start is not solved within the peers' budget is
+    an open marker at the budget ("not reached").  Right: the best peer's median over
+    ours (solid) and over ours with the calibration (dashed); no point where neither
+    solves the median start.
+    """
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    sizes = sorted(cases)
+    fig, (ax, ax_r) = plt.subplots(1, 2, figsize=(11.5, 4.4))
+    for m in cases[sizes[0]]['summaries']:
+        medians = [cases[n]['summaries'][m]['median_full_runs'] for n in sizes]
+        series = [(medians, '-', SHORT[m])]
+        if m == 'dq_simplified':
+            series.append(([v + cases[n]['calibration_runs'] for v, n in zip(medians, sizes)],
+                           '--', 'ours incl. calibration'))
+        for values, style, label in series:
+            y = [v if math.isfinite(v) else np.nan for v in values]
+            line, = ax.plot(sizes, y, style, marker='o', lw=2.2 if m == 'dq_simplified'
+                            else 1.3, label=label,
+                            color=None if style == '-' else ax.lines[-1].get_color())
+            missed = [n for n, v in zip(sizes, values) if not math.isfinite(v)]
+            ax.plot(missed, [PEER_BUDGET] * len(missed), 'o', mfc='none',
+                    color=line.get_color())
+    ax.axhline(PEER_BUDGET, color='0.6', lw=0.8, ls=':')
+    ax.set_yscale('log')
+    ax.set_xticks(sizes)
+    ax.set_xlabel('design variables n')
+    ax.set_ylabel('median full runs to solve (6 starts)')
+    ax.set_title(f'{scenario}, fixed step (open marker: not solved in {PEER_BUDGET})',
+                 fontsize=10)
+    ax.grid(True, alpha=0.3, which='both')
+    ax.legend(fontsize=7, loc='lower right')
+    for key, style, label in (('full_runs_ratio_vs_best_peer', '-o', 'runs to solve'),
+                              ('full_runs_ratio_vs_best_peer_with_calibration', '--o',
+                               'ours incl. calibration')):
+        points = [(n, cases[n]['peers'][key]) for n in sizes
+                  if math.isfinite(cases[n]['peers'][key])]
+        ax_r.plot([n for n, _ in points], [v for _, v in points], style, label=label)
+    ax_r.axhline(1.0, color='0.5', lw=0.8, ls=':')
+    ax_r.set_xticks(sizes)
+    ax_r.set_xlim(sizes[0] - 0.5, sizes[-1] + 0.5)
+    ax_r.set_ylim(bottom=0)
+    ax_r.set_xlabel('design variables n')
+    ax_r.set_ylabel("best peer's median full runs / ours")
+    ax_r.set_title(f'{scenario}: full-run ratio to the best peer', fontsize=10)
+    ax_r.grid(True, alpha=0.3)
+    ax_r.legend(fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--scenario', choices=SCENARIOS, default='ride',
+                        help='the case (default ride)')
     parser.add_argument('--write-reference', action='store_true',
-                        help='search the ride8 reference and write it (see above)')
+                        help="search the case's 8-variable reference and write it "
+                             '(see above)')
     parser.add_argument('--peers', default='cobyla',
                         help="comma-separated peers, or 'all' (default cobyla)")
     parser.add_argument('--noisy', action='store_true',
                         help='the variable-step model too')
     parser.add_argument('--ratio-n', type=int, nargs='*', default=[2, 4, 8],
-                        help='sizes of the ratio_by_n lines (default 2 4 8; the ride8 '
-                             'lines need 8)')
+                        help='sizes of the ratio_by_n lines (default 2 4 8; the '
+                             '8-variable lines need 8)')
     parser.add_argument('--jobs', type=int, default=1, help='(reserved) worker processes')
+    parser.add_argument('--plot-dir', type=Path, metavar='DIR',
+                        help='write the 8-variable data profile (method_peers_<scenario>'
+                             '_8var.png) and the runs against n (method_runs_by_n_'
+                             '<scenario>.png) there')
     parser.add_argument('--calibration-samples', type=int, default=-1, metavar='N',
                         help="ours' eq. 25 samples (0: none; default -1: what a tuning "
                         'goal spends, config/simplified_models.yaml scaling.run_samples)')
     args = parser.parse_args()
     if args.write_reference:
-        write_reference()
+        write_reference(args.scenario)
         return
     peers = PEERS if args.peers == 'all' else tuple(p for p in args.peers.split(',') if p)
     unknown = [p for p in peers if p not in PEERS]
@@ -175,29 +272,42 @@ def main() -> None:
         raise SystemExit(f'unknown peer(s) {unknown}; valid: {", ".join(PEERS)}, all')
     install_study_extra()
     t0 = time.perf_counter()
-    print(f'ride8_peers: {",".join(peers)}')
+    scenario = args.scenario
+    print(f'{scenario}{N_VARS}_peers: {",".join(peers)}')
     cases = {}
     for n in sorted(set(args.ratio_n)):
-        cases[n] = run_case(n, mb.REFERENCE_INTEGRATOR, peers, args.jobs,
+        cases[n] = run_case(scenario, n, mb.REFERENCE_INTEGRATOR, peers, args.jobs,
                             samples=args.calibration_samples)
-        print(f'ride{n}_reference_f: {cases[n]["reference"].f:.6f}', flush=True)
+        print(f'{scenario}{n}_reference_f: {cases[n]["reference"].f:.6f}', flush=True)
     if N_VARS in cases:
-        print_ride8(cases[N_VARS], '')
+        print_case(scenario, cases[N_VARS], '')
     for n in sorted(args.ratio_n):
         out = cases[n]
         p = out['peers']
         ours = out['summaries']['dq_simplified']['median_full_runs']
-        print(f'ratio_by_n: n {n}, ours_median_full_runs {runs(ours)}, ours_solved '
+        print(f'ratio_by_n: {scenario} n {n}, ours_median_full_runs {runs(ours)}, ours_solved '
               f'{out["summaries"]["dq_simplified"]["starts_solved"]}, best_peer '
               f'{p["best_peer"]} {runs(p["peer_best_full_runs"])}, calibration_runs '
               f'{out["calibration_runs"]}, ratio '
-              f'{p["full_runs_ratio_vs_best_peer"]:.2f}, paid_ratio '
-              f'{p["full_runs_ratio_vs_best_peer_with_calibration"]:.2f}')
-    print(f'bench_ride8_fixed_step_wall_s: {time.perf_counter() - t0:.1f}', flush=True)
+              f'{ratio_text(p["full_runs_ratio_vs_best_peer"], ours, p)}, paid_ratio '
+              f'{ratio_text(p["full_runs_ratio_vs_best_peer_with_calibration"], ours, p)}')
+    print(f'bench_{scenario}{N_VARS}_fixed_step_wall_s: {time.perf_counter() - t0:.1f}',
+          flush=True)
+    profiled = [cases[N_VARS]] if N_VARS in cases else []
     if args.noisy:
-        print_ride8(run_case(N_VARS, NOISY, peers, args.jobs,
-                             samples=args.calibration_samples), '_noisy')
-    print(f'bench_ride8_wall_s: {time.perf_counter() - t0:.1f}')
+        noisy = run_case(scenario, N_VARS, NOISY, peers, args.jobs,
+                         samples=args.calibration_samples)
+        print_case(scenario, noisy, '_noisy')
+        profiled.append(noisy)
+    if args.plot_dir is not None:
+        if profiled:
+            path = data_profile(profiled, args.plot_dir / f'method_peers_{scenario}_8var.png')
+            print(f'{scenario}{N_VARS}_data_profile: {path}')
+        if len(cases) > 1:
+            path = plot_by_n(scenario, cases,
+                             args.plot_dir / f'method_runs_by_n_{scenario}.png')
+            print(f'{scenario}_runs_by_n_plot: {path}')
+    print(f'bench_{scenario}{N_VARS}_wall_s: {time.perf_counter() - t0:.1f}')
 
 
 if __name__ == '__main__':

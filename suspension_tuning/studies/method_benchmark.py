@@ -73,6 +73,11 @@ REFERENCE_INTEGRATOR = 'fixed_step'
 REPORT_GTOL = 1e-3
 #: A reported design is solved when its gap is at most 1 % ...
 SOLVED_GAP_PCT = 1.0
+#: Looser gaps of the data profiles' tolerance (More and Wild 2009 use several), %:
+#: full runs until the reported design is within each (max g <= 0.005 as for solved).
+#: Where no method is solved at 1 % in the budget (the 8-variable ride), they still
+#: compare the methods [E].
+LOOSE_GAPS_PCT = (2.0, 5.0)
 #: ... and its largest g at most 0.005 (0.05 % of the run time beyond eq. 11's limit).
 SOLVED_VIOLATION = 0.005
 #: Seed and number of the Latin-hypercube start points of :func:`benchmark_starts`.
@@ -459,6 +464,9 @@ class StartResult:
     check_max_violation: float = math.nan
     check_runs: int = 0  # the check's full runs, counted in full_runs too
     calibration_runs: int = 0
+    #: Full runs until the reported design is within each of :data:`LOOSE_GAPS_PCT`
+    #: (keyed by the gap, %; ``inf``: not reached).
+    full_runs_to_gap: dict[float, float] = field(default_factory=dict)
 
     @property
     def solved_checked(self) -> bool:
@@ -540,6 +548,8 @@ def judge_run(run: common.StudyRun, x0: ArrayLike, reference: Reference,
     viol_fixed = common.max_violation(g_fixed[0]) if noisy else viol
     gap = gap_pct(f_fixed[0], reference.f)
     to_solve = full_runs_to_solve(records, reference.f, judge.f if noisy else None)
+    to_gap = {tau: full_runs_to_solve(records, reference.f, judge.f if noisy else None,
+                                      max_gap_pct=tau) for tau in LOOSE_GAPS_PCT}
     f_budget, viol_budget, feasible_budget = reported_within(
         records, budget, judge if noisy else None)
     return StartResult(
@@ -550,7 +560,8 @@ def judge_run(run: common.StudyRun, x0: ArrayLike, reference: Reference,
         full_runs_to_solve=to_solve, full_runs=run.n_full_runs,
         wall_time_s=run.wall_time_s,
         budget_gap_pct=math.nan if f_budget is None else gap_pct(f_budget, reference.f),
-        budget_max_violation=viol_budget, budget_feasible=feasible_budget, budget=budget)
+        budget_max_violation=viol_budget, budget_feasible=feasible_budget, budget=budget,
+        full_runs_to_gap=to_gap)
 
 
 def solved_watch(reference: Reference, judge: FixedStepJudge | None
