@@ -73,6 +73,11 @@ def _check_run(scenario: str, n_vars: int, x: ArrayLike, settings: CheckSettings
     settings = load_check_settings() if settings is None else settings
     params = with_integrator(load_vehicle_params(), 'variable_step', rtol=settings.rtol,
                              atol=settings.atol)
+    if scenario == 'mixed':  # in-process valve controllers (the same bits as over ROS)
+        from suspension_tuning.vehicle.design import validate_design
+        from suspension_tuning.vehicle.mixed import run_mixed
+
+        return run_mixed(validate_design(x, n_vars), params=params)
     return run_scenario(scenario, np.asarray(x, float)[None, :],
                         params=condition_params(condition, params), n_vars=n_vars,
                         config=condition_scenarios(condition), integrator='variable_step')

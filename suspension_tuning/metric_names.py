@@ -28,5 +28,7 @@ METRIC_NAMES: dict[str, tuple[str, ...]] = {
                  't_first_lane_change_s_0', 't_first_lane_change_s_1', 't_manoeuvre_s_0',
                  't_manoeuvre_s_1'),
     'mixed': ('a_rms_driver_mps2', 'a_rms_passenger_mps2', 'roll_first_peak_deg',
-              'roll_rate_rms_deg_s', 'valve_switches', 'handling_state_fraction'),
+              'roll_rate_rms_deg_s', 'valve_switches', 'handling_state_fraction',
+              't_first_lane_change_s_0', 't_first_lane_change_s_1', 't_manoeuvre_s_0',
+              't_manoeuvre_s_1'),
 }

@@ -7,7 +7,8 @@ inputs are captured from the full model's run at the current design by
 returns them with the design's values, and the coordinator passes them on to the
 gradient evaluator, packed as a TimeHistories message (flat, row-major) by
 :func:`pack` and unpacked by :func:`unpack`.  The ride model needs nothing from the
-run (the seeded road is known in advance): its message is empty.
+run (the seeded road is known in advance): its message is empty.  The mixed scenario's
+handling part travels the same way (its lane change, :class:`SimplifiedInputs`).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from suspension_tuning.vehicle.handling_model import HandlingInputs
-from suspension_tuning.vehicle.simplified import SimplifiedInputs
+from suspension_tuning.vehicle.simplified import INPUT_SCENARIOS, SimplifiedInputs
 
 CORNERS = ('fl', 'fr', 'rl', 'rr')
 CHANNELS = ('steer_rad', *(f'slip_angle_{c}_rad' for c in CORNERS))
@@ -46,12 +47,12 @@ def unpack(scenario: str, message: Any, x: np.ndarray | None = None) -> Simplifi
     Raises
     ------
     ValueError
-        The handling scenario without inputs, or channels that do not fit.
+        The handling or mixed scenario without inputs, or channels that do not fit.
     """
-    if scenario != 'handling':
+    if scenario not in INPUT_SCENARIOS:
         return SimplifiedInputs(scenario, x)
     if list(message.names) != list(CHANNELS) or list(message.scalar_names) != list(SCALARS):
-        raise ValueError('the handling gradient needs the full model\'s inputs at x '
+        raise ValueError(f'the {scenario} gradient needs the full model\'s inputs at x '
                          f'(channels {list(CHANNELS)}), got {list(message.names)}')
     n = int(message.n_samples)
     data = np.asarray(message.data, dtype=float)
@@ -62,4 +63,4 @@ def unpack(scenario: str, message: Any, x: np.ndarray | None = None) -> Simplifi
     handling = HandlingInputs(t_s=t0 + float(message.dt_s) * np.arange(n), speed_mps=speed,
                               steer_rad=data[0], slip_angle_rad=data[1:],
                               first_lane_change_s=(lc0, lc1), manoeuvre_s=(m0, m1))
-    return SimplifiedInputs('handling', x, handling)
+    return SimplifiedInputs(scenario, x, handling)

@@ -152,7 +152,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     """
     parser = argparse.ArgumentParser(prog='tune', description=__doc__.split('\n')[0])
     parser.add_argument('--scenario', default='ride',
-                        help="'ride' or 'handling' ('mixed' too with --evaluate)")
+                        help="'ride', 'handling' or 'mixed' (both 4S4 states with a design that "
+                             'names them: docs/design_space.md)')
     parser.add_argument('--n-vars', type=_design_size, default=None,
                         help='2 or 4 design variables (the paper\'s), or the size of a preset '
                              'of config/design_space.yaml (8: ride8); default 2, or the size '

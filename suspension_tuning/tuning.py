@@ -64,8 +64,9 @@ class RunCancelled(Exception):  # noqa: N818 - a stop, not an error
     :func:`optimise` then stops as on a cancelling callback: its result holds the
     iterations completed before (the best design among them), status 99.
     """
-#: Scenarios that can be optimised (the mixed scenario is a closed-loop check only).
-OPTIMISATION_SCENARIOS = ('ride', 'handling')
+#: Scenarios that can be optimised ('mixed': rough road then lane change, the valves
+#: switched closed-loop; both 4S4 states at once with a design that names them).
+OPTIMISATION_SCENARIOS = ('ride', 'handling', 'mixed')
 #: Scenarios whose full-model run can give an extra constraint.
 CONSTRAINT_SCENARIOS = ('ride', 'handling', 'mixed')
 #: Names of each scenario's objective in a constraint (besides 'f'): eqs. 9 and 10,
@@ -73,8 +74,11 @@ CONSTRAINT_SCENARIOS = ('ride', 'handling', 'mixed')
 OBJECTIVE_NAMES = {'ride': 'f_ride', 'handling': 'f_hand', 'mixed': 'f_mixed'}
 #: Names of the eq. 11 tyre-hop constraints in a constraint (FL, FR, RL, RR).
 TYRE_HOP_NAMES = ('g_fl', 'g_fr', 'g_rl', 'g_rr')
-#: Scenarios with an eq. 25-scaled simplified model of f and g (paper section 6).
-SIMPLIFIED_SCENARIOS = ('ride', 'handling')
+#: Scenarios with an eq. 25-scaled simplified model of f and g (paper section 6; 'mixed':
+#: both of the paper's, each in its valve state, ``vehicle.simplified``).
+SIMPLIFIED_SCENARIOS = ('ride', 'handling', 'mixed')
+#: Scenarios whose simplified model needs the full run's inputs (steer, slip angles).
+INPUT_SCENARIOS = ('handling', 'mixed')
 
 
 @dataclass
@@ -899,7 +903,7 @@ class _ConstraintTerms:
         return np.column_stack([primary.f, primary.g, self._constraint_values(runs)])
 
     def _inputs(self, scenario: str, x: Array) -> Any:
-        if self.inputs.get(scenario) is None and scenario == 'handling':
+        if self.inputs.get(scenario) is None and scenario in INPUT_SCENARIOS:
             # Resumed from a history: the simplified handling model needs the full
             # model's steering and slip angles at x (paper 6.1), so run it once.
             self.inputs[scenario] = self._run(scenario, x[None, :]).inputs

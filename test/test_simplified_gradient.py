@@ -69,7 +69,7 @@ def test_handling_needs_inputs_and_mismatched_scaling_is_rejected():
     with pytest.raises(ValueError, match='scenario'):
         SimplifiedGradient('handling', 2, _toy_scaling())
     with pytest.raises(ValueError, match='unknown scenario'):
-        SimplifiedGradient('mixed', 2)
+        SimplifiedGradient('pothole', 2)
     with pytest.raises(ValueError, match='step'):
         SimplifiedGradient('ride', 2, step=0.0)
     with pytest.raises(ValueError, match='outside the bounds'):

@@ -74,6 +74,7 @@ from suspension_tuning.paths import config_dir, dump_yaml, read_yaml
 from suspension_tuning.physical_metrics import SHOWN, physical_metrics
 from suspension_tuning.reported_design import design_success, reported_design, result_message
 from suspension_tuning.tuning import (
+    INPUT_SCENARIOS,
     FullEvaluation,
     RunCancelled,
     RunCounter,
@@ -461,13 +462,13 @@ class CoordinatorNode(Node):
         scenario = scenario or request.scenario
 
         def evaluate(designs: np.ndarray) -> FullEvaluation:
-            # The simplified handling model runs on the inputs of the full run at x
-            # (simplified_inputs.py); the ride model needs none.
+            # The simplified handling model (of 'handling' and 'mixed') runs on the
+            # inputs of the full run at x (simplified_inputs.py); the ride model needs none.
             try:
                 responses = self.pool.evaluate(
                     scenario, request.n_vars, designs,
                     return_inputs=(request.gradient_source == 'simplified'
-                                   and len(designs) == 1 and scenario == 'handling'),
+                                   and len(designs) == 1 and scenario in INPUT_SCENARIOS),
                     integrator=request.integrator, road=request.road)
             except (ValueError, ServiceCallError) as error:
                 if self._cancel_requested():

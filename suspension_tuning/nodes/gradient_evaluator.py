@@ -56,8 +56,9 @@ from suspension_tuning.optim.simplified_gradient import (
 )
 from suspension_tuning.vehicle.design import load_design_space, validate_design
 from suspension_tuning.vehicle.road import road_identity
+from suspension_tuning.vehicle.simplified import INPUT_SCENARIOS, SIMPLIFIED_SCENARIOS
 
-SCENARIOS = ('ride', 'handling')
+SCENARIOS = SIMPLIFIED_SCENARIOS
 
 
 class GradientEvaluatorNode(Node):
@@ -174,7 +175,8 @@ class GradientEvaluatorNode(Node):
     def _calibrate_remote(self, scenario: str, n_vars: int, x: np.ndarray,
                           key: dict, road: str = '', condition: str = '') -> Scaling:
         """Full-model samples from the simulation workers, then the eq. 25 fit."""
-        # Only the handling model needs each sample's inputs (simplified_inputs.py).
+        # Only the handling model (of 'handling' and 'mixed') needs each sample's inputs
+        # (simplified_inputs.py).
         start = time.monotonic()
 
         def progress(done: int) -> None:
@@ -184,7 +186,7 @@ class GradientEvaluatorNode(Node):
 
         try:
             answers = self.pool.evaluate(scenario, n_vars, x,
-                                         return_inputs=scenario == 'handling',
+                                         return_inputs=scenario in INPUT_SCENARIOS,
                                          integrator=key.get('integrator', ''), road=road,
                                          on_piece=progress,
                                          conditions=[condition] * len(x) if condition

@@ -25,7 +25,12 @@ from suspension_tuning.optim.scaling import Scaling, fit_scaling, sample_design_
 from suspension_tuning.vehicle.design import X_LOWER, X_UPPER, DesignSpace, validate_design
 from suspension_tuning.vehicle.handling_model import HandlingInputs
 from suspension_tuning.vehicle.pitch_plane import load_simplified_config
-from suspension_tuning.vehicle.simplified import SimplifiedInputs, run_simplified
+from suspension_tuning.vehicle.simplified import (
+    INPUT_SCENARIOS,
+    SIMPLIFIED_SCENARIOS,
+    SimplifiedInputs,
+    run_simplified,
+)
 
 Array = NDArray[np.float64]
 
@@ -39,8 +44,9 @@ def as_simplified_inputs(scenario: str, inputs: Any) -> SimplifiedInputs | None:
     but a SimplifiedInputs of another scenario is accepted and ignored.
     """
     if inputs is None:
-        if scenario == 'handling':
-            raise ValueError('the handling gradient needs the full model inputs (steer, slip)')
+        if scenario in INPUT_SCENARIOS:
+            raise ValueError(f'the {scenario} gradient needs the full model inputs (steer, '
+                             'slip)')
         return SimplifiedInputs(scenario)
     if isinstance(inputs, SimplifiedInputs):
         if inputs.scenario != scenario:
@@ -49,7 +55,7 @@ def as_simplified_inputs(scenario: str, inputs: Any) -> SimplifiedInputs | None:
     if scenario == 'ride':
         return SimplifiedInputs('ride')  # the ride road comes from config: nothing needed
     if isinstance(inputs, HandlingInputs):
-        return SimplifiedInputs('handling', None, inputs)
+        return SimplifiedInputs(scenario, None, inputs)
     result = getattr(inputs, 'result', inputs)
     if hasattr(result, 'histories') and hasattr(result, 'name'):
         return as_simplified_inputs(scenario, SimplifiedInputs.from_scenario_result(result))
@@ -184,9 +190,10 @@ def fit_calibration(
                                  condition=condition)
     else:
         if inputs is None or len(inputs) != len(x):
-            raise ValueError('the handling calibration needs the full model inputs per sample')
+            raise ValueError(f'the {scenario} calibration needs the full model inputs per '
+                             'sample')
         simp = np.vstack(
-            [simplified_values(scenario, x[i], n_vars, inputs[i], space=space)
+            [simplified_values(scenario, x[i], n_vars, inputs[i], road=road, space=space)
              for i in range(len(x))]
         )
     return fit_scaling(x, full, simp, key=key)
@@ -246,6 +253,11 @@ def calibrate(
             def run_full(name: str, designs: Array) -> Any:
                 return run_scenario(name, designs, condition_params(parsed),
                                     config=condition_scenarios(parsed), space=space)
+        elif scenario == 'mixed':
+            from suspension_tuning.vehicle.mixed import run_mixed
+
+            def run_full(name: str, designs: Array) -> Any:
+                return run_mixed(designs, space=space)
         else:
             from suspension_tuning.vehicle.scenarios import run_scenario as run_full
     res = run_full(scenario, x)
@@ -324,8 +336,9 @@ class SimplifiedGradient:
         space: DesignSpace | None = None,
         condition: str = '',
     ) -> None:
-        if scenario not in ('ride', 'handling'):
-            raise ValueError(f"unknown scenario {scenario!r}; valid: 'ride', 'handling'")
+        if scenario not in SIMPLIFIED_SCENARIOS:
+            raise ValueError(f'unknown scenario {scenario!r}; valid: '
+                             f'{", ".join(map(repr, SIMPLIFIED_SCENARIOS))}')
         validate_design(np.full(n_vars, X_UPPER), n_vars)
         if scaling is not None:
             for k, v in (('scenario', scenario), ('n_vars', n_vars)):

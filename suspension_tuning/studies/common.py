@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import OptimizeResult, minimize
 
+from suspension_tuning.evaluation import evaluate
 from suspension_tuning.model_identity import builtin_fingerprint
 from suspension_tuning.optim.dynamic_q import load_options
 from suspension_tuning.optim.simplified_gradient import SimplifiedGradient
@@ -247,9 +248,7 @@ class FullModelCache:
         if key not in self.values:
             if self.budget is not None and self.n_runs >= self.budget:
                 raise BudgetExhaustedError(f'budget of {self.budget} full runs spent')
-            result = run_scenario(
-                self.scenario, xv[None, :], n_vars=self.n_vars, integrator=self.integrator
-            )
+            result = evaluate(self.scenario, xv[None, :], integrator=self.integrator)
             self.values[key] = (float(result.f[0]), np.asarray(result.g[0], float).copy())
         return self.values[key]
 

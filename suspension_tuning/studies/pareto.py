@@ -51,6 +51,7 @@ from suspension_tuning.optim.simplified_gradient import (
     calibration_settings,
 )
 from suspension_tuning.paths import config_dir
+from suspension_tuning.studies.two_state import MIXED_ROUGH_LENGTH_M
 from suspension_tuning.tuning import TYRE_HOP_NAMES, ConstraintSpec, physical_settings
 from suspension_tuning.vehicle import metrics
 from suspension_tuning.vehicle.full_model import SuspensionSetting
@@ -64,10 +65,6 @@ Array = NDArray[np.float64]
 FRONT_POINTS = {2: 8, 4: 8}
 #: Start points of the single-objective optima (``common.start_point``).
 END_POINT_STARTS = ('centre', 'baseline')
-#: Paving length of the study's mixed runs, m [E]: 3 s of W_b settling plus 12 s of
-#: averaging at 65 km/h (271 m), the 12 s the ride scenario averages over; the 80 m of
-#: config/mixed.yaml leave 1.3 s after the settling time.
-MIXED_ROUGH_LENGTH_M = 271.0
 
 
 @dataclass
@@ -408,11 +405,13 @@ def run_pareto(out: Path, n_vars: int = 4, n_points: int | None = None, bags: bo
         switched[label] = {
             'f_ride': float(mf_r[row]), 'f_hand': float(mf_h[row]),
             'gap_ride_pct': float(mixed_gap_r[row]), 'gap_hand_pct': float(mixed_gap_h[row]),
-            'metrics': {k: float(v[row]) for k, v in mixed['metrics'].items()}}
+            'metrics': {k: float(v[row]) for k, v in mixed['metrics'].items()
+                        if np.ndim(v) == 1}}
     mixed_points = [{'name': p.name, 'f_ride': float(mf_r[i]), 'f_hand': float(mf_h[i]),
                      'gap_ride_pct': float(mixed_gap_r[i]),
                      'gap_hand_pct': float(mixed_gap_h[i]),
-                     'metrics': {k: float(v[i]) for k, v in mixed['metrics'].items()}}
+                     'metrics': {k: float(v[i]) for k, v in mixed['metrics'].items()
+                                 if np.ndim(v) == 1}}
                     for i, p in enumerate(points)]
     bag_paths = []
     if bags:

@@ -260,7 +260,12 @@ class HandlingModel:
             'roll_rate_rms_deg_s' (batch,).
         """
         xb = validate_design(x, n_vars)
-        rec = self.simulate(to_physical(xb, n_vars, space), inputs)
+        return self.evaluate_settings(to_physical(xb, n_vars, space), inputs)
+
+    def evaluate_settings(self, settings: AxleSettings, inputs: HandlingInputs
+                          ) -> dict[str, np.ndarray]:
+        """Eqs. 10 and 11 of physical settings (:meth:`evaluate` without the design map)."""
+        rec = self.simulate(settings, inputs)
         p = self.params
         static = np.array([p.static_tyre_load_front_n, p.static_tyre_load_front_n,
                            p.static_tyre_load_rear_n, p.static_tyre_load_rear_n])

@@ -262,11 +262,15 @@ def f_hand(
     return (term_r + term_p) / 2.0
 
 
+#: Permitted fraction of time a tyre is off the ground, eq. 11 [P section 5.3].
+TYRE_HOP_MAX_FRACTION = 0.1
+
+
 def tyre_hop_constraints(
     fz_n: np.ndarray,
     dt_s: float | np.ndarray,
     fz_threshold_n: float = FZ_CONTACT_THRESHOLD_N,
-    max_fraction: float = 0.1,
+    max_fraction: float = TYRE_HOP_MAX_FRACTION,
 ) -> np.ndarray:
     """Compute the tyre hop constraints, eq. 11: ``g_i = 10 (t(Fz_i = 0)/t_total - 0.1) <= 0``.
 
@@ -307,7 +311,7 @@ def soft_tyre_hop_constraints(
     fz_n: np.ndarray,
     static_load_n: np.ndarray,
     load_fraction: float,
-    max_fraction: float = 0.1,
+    max_fraction: float = TYRE_HOP_MAX_FRACTION,
 ) -> np.ndarray:
     """A tyre-hop measure that is smooth in the design: eq. 11 with a soft count.
 

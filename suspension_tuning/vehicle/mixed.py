@@ -241,7 +241,9 @@ def _result(xv, model, track, cfg, valve_log, period, start, wall, duration) -> 
     met = {'a_rms_driver_mps2': a_d, 'a_rms_passenger_mps2': a_p,
            'roll_first_peak_deg': peak, 'roll_rate_rms_deg_s': rate_rms,
            'valve_switches': switches.astype(float),
-           'handling_state_fraction': handling_share}
+           'handling_state_fraction': handling_share,
+           't_first_lane_change_s': np.stack(t_lc, axis=1),
+           't_manoeuvre_s': np.stack(t_man, axis=1)}
     t_hist = rec.t_hist_s
     hists = decimated_histories(rec)
     idx = np.minimum((t_hist / period).astype(int), valve_log.shape[-1] - 1)

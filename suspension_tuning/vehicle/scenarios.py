@@ -155,7 +155,7 @@ def run_scenario(
     Parameters
     ----------
     name : {'ride', 'handling'}
-        Scenario.
+        Scenario (the mixed one: :func:`suspension_tuning.evaluation.evaluate`).
     x : np.ndarray
         Normalised design(s), shape (n_vars,) or (batch, n_vars), n_vars 2 or 4
         (paper eqs. 4-8; 0.001 <= x <= 1).

@@ -8,6 +8,14 @@ ride needs nothing from the run).  The ROS gradient node can cache one per itera
 :func:`run_simplified` evaluates f (eq. 9 or 10) and g (eq. 11, FL, FR, RL, RR) of a batch
 of designs with the pitch-plane ride model or the handling model.  Models are cached per
 process (building the ride road costs one road synthesis).
+
+The 'mixed' scenario (rough road, then the double lane change, the 4S4 valves switched
+by the controller) has no model of its own in the paper; its simplified model is the two
+the paper has, each in the state the valve controller engages there
+(:func:`run_mixed_simplified`): the pitch-plane model on the paving at the mixed
+scenario's speed and length in the ride state, the handling model on the lane change in
+the handling state, with f their mean as the full scenario's f (eqs. 9, 10) and g eq. 11
+over both parts, weighted by their durations.
 """
 
 from __future__ import annotations
@@ -17,11 +25,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .design import DesignSpace
+from .design import AXLES, AxleSettings, DesignSpace, to_physical, validate_design
 from .handling_model import HandlingInputs, HandlingModel
+from .metrics import TYRE_HOP_MAX_FRACTION
 from .pitch_plane import PitchPlaneModel
 
-SIMPLIFIED_SCENARIOS = ('ride', 'handling')
+SIMPLIFIED_SCENARIOS = ('ride', 'handling', 'mixed')
+#: Scenarios whose simplified model needs inputs captured from the full model's run.
+INPUT_SCENARIOS = ('handling', 'mixed')
 
 
 @dataclass(frozen=True)
@@ -31,11 +42,12 @@ class SimplifiedInputs:
     Attributes
     ----------
     scenario : str
-        'ride' or 'handling'.
+        'ride', 'handling' or 'mixed'.
     x : np.ndarray or None
         Normalised design of the full run they came from (n_vars,), for bookkeeping.
     handling : HandlingInputs or None
-        Steering, slip angles, speed and metric windows (handling only).
+        Steering, slip angles, speed and metric windows (handling and mixed: the lane
+        change).
     """
 
     scenario: str
@@ -48,8 +60,9 @@ class SimplifiedInputs:
             raise ValueError(
                 f'unknown scenario {self.scenario!r}; valid: {", ".join(SIMPLIFIED_SCENARIOS)}'
             )
-        if self.scenario == 'handling' and not isinstance(self.handling, HandlingInputs):
-            raise ValueError('handling SimplifiedInputs need HandlingInputs (steer, slip angles)')
+        if self.scenario in INPUT_SCENARIOS and not isinstance(self.handling, HandlingInputs):
+            raise ValueError(f'{self.scenario} SimplifiedInputs need HandlingInputs (steer, '
+                             'slip angles)')
 
     @classmethod
     def from_scenario_result(cls, result, index: int = 0) -> SimplifiedInputs:
@@ -57,24 +70,36 @@ class SimplifiedInputs:
 
         Handling: the decimated histories 't_s', 'steer_rad', 'slip_angle_rad', the mean
         speed over the run and the metric windows 't_first_lane_change_s',
-        't_manoeuvre_s'.  Ride: only the design (the road comes from config).
+        't_manoeuvre_s'.  Mixed: the same from the lane change, starting the handling
+        scenario's lead-in (config/scenarios.yaml ``handling.lead_in_m``) before lane 1,
+        on the smooth road after the paving.  Ride: only the design (the road comes from
+        config).
         """
         name = result.name
         x = np.asarray(result.x, dtype=float)[index].copy()
         if name == 'ride':
             return cls('ride', x)
-        if name != 'handling':
+        if name not in INPUT_SCENARIOS:
             raise ValueError(f'no simplified model for scenario {name!r}')
         h, m = result.histories, result.metrics
+        t = np.asarray(h['t_s'], dtype=float)
+        manoeuvre = tuple(m['t_manoeuvre_s'][index])
+        first = 0
+        if name == 'mixed':
+            from .params import load_scenarios_config
+
+            speed = float(np.mean(h['speed_mps'][index]))
+            lead_s = float(load_scenarios_config()['handling']['lead_in_m']) / speed
+            first = int(np.searchsorted(t, manoeuvre[0] - lead_s))
         inputs = HandlingInputs(
-            t_s=np.asarray(h['t_s'], dtype=float),
-            speed_mps=float(np.mean(h['speed_mps'][index])),
-            steer_rad=np.asarray(h['steer_rad'][index], dtype=float),
-            slip_angle_rad=np.asarray(h['slip_angle_rad'][index], dtype=float),
+            t_s=t[first:],
+            speed_mps=float(np.mean(h['speed_mps'][index][first:])),
+            steer_rad=np.asarray(h['steer_rad'][index][first:], dtype=float),
+            slip_angle_rad=np.asarray(h['slip_angle_rad'][index][:, first:], dtype=float),
             first_lane_change_s=tuple(m['t_first_lane_change_s'][index]),
-            manoeuvre_s=tuple(m['t_manoeuvre_s'][index]),
+            manoeuvre_s=manoeuvre,
         )
-        return cls('handling', x, inputs)
+        return cls(name, x, inputs)
 
 
 @functools.lru_cache(maxsize=16)
@@ -134,14 +159,14 @@ def run_simplified(
 
     Parameters
     ----------
-    scenario : {'ride', 'handling'}
+    scenario : {'ride', 'handling', 'mixed'}
         Scenario.
     x : array_like
         Normalised designs (n_vars,) or (batch, n_vars) in [0.001, 1].
     n_vars : int
-        2 or 4.
+        2 or 4, or a preset's size.
     inputs : SimplifiedInputs, optional
-        Required for 'handling' (captured from the full model's run).
+        Required for 'handling' and 'mixed' (captured from the full model's run).
     road : str
         Ride road in place of the configured one (:func:`pitch_plane_model`).
     space : DesignSpace, optional
@@ -162,7 +187,102 @@ def run_simplified(
     if scenario == 'ride':
         return pitch_plane_model(road, condition).evaluate(x, n_vars, space)
     if inputs is None or inputs.handling is None:
-        raise ValueError('the handling model needs SimplifiedInputs from a full handling run')
-    if inputs.scenario != 'handling':
-        raise ValueError(f'inputs are for scenario {inputs.scenario!r}, not handling')
+        raise ValueError(f'the {scenario} simplified model needs SimplifiedInputs from a full '
+                         f'{scenario} run')
+    if inputs.scenario != scenario:
+        raise ValueError(f'inputs are for scenario {inputs.scenario!r}, not {scenario}')
+    if scenario == 'mixed':
+        if condition:
+            raise ValueError('the mixed scenario runs without an operating condition')
+        return run_mixed_simplified(x, n_vars, inputs.handling, road, space)
     return handling_model(condition).evaluate(x, n_vars, inputs.handling, space)
+
+
+@functools.lru_cache(maxsize=8)
+def mixed_pitch_plane_model(road: str = '') -> PitchPlaneModel:
+    """The pitch-plane model on the mixed scenario's paving (config/mixed.yaml).
+
+    The ride scenario's road (or ``road``) at the mixed scenario's speed, for as long as
+    the full run stays on the paving (``rough_length_m``; at least one second after the
+    ``settle_s`` W_b settling), so the eq. 9 window is the full run's.
+    """
+    from .mixed import load_mixed_config
+    from .params import load_scenarios_config, load_vehicle_params
+    from .pitch_plane import RideSetup
+
+    cfg = load_mixed_config()
+    params = load_vehicle_params()
+    scenarios = load_scenarios_config()
+    ride = scenarios['ride']
+    if road:
+        ride['road'] = road
+    speed = float(cfg['speed_kmh']) / 3.6
+    settle = float(cfg['settle_s'])
+    ride.update(speed_kmh=float(cfg['speed_kmh']), settle_s=settle,
+                duration_s=max(float(cfg['rough_length_m']) / speed, settle + 1.0))
+    return PitchPlaneModel(params, RideSetup.from_scenario_config(params, scenarios))
+
+
+def mixed_handling_settings(settings: AxleSettings) -> AxleSettings:
+    """The handling-state settings the mixed scenario's full run gives each design.
+
+    The full run puts a design's generic settings (``dpsf``, ``gas_volume`` and their
+    compression/rebound halves) in the ride state and keeps the handling state at
+    config/strut_4s4.yaml's baseline unless the design sets it explicitly
+    (``gas_volume_stiff``, ``dpsf_high``; ``SuspensionSetting.from_design`` in mode
+    'ride', whose stiff volume is capped at the soft one); anti-roll bars act in both
+    states.  This is that handling state, as one-state settings for the handling model.
+    """
+    from .full_model import SuspensionSetting
+    from .params import load_vehicle_params
+
+    full = SuspensionSetting.from_design(settings, 'ride', load_vehicle_params())
+    dpsf = {a: full.dpsf_high[:, j] for j, a in enumerate(AXLES)}
+    spring = {a: full.gas_volume_stiff_m3[:, j] for j, a in enumerate(AXLES)}
+    extra = {a: v for a, v in settings.extra.items() if a.startswith('anti_roll_bar')}
+    extra.update({f'dpsf_rebound_{a}': full.dpsf_high_rebound[:, j]
+                  for j, a in enumerate(AXLES)})
+    return AxleSettings.of(dpsf, spring, 'volume', extra)
+
+
+def run_mixed_simplified(x: np.ndarray, n_vars: int, inputs: HandlingInputs, road: str = '',
+                         space: DesignSpace | None = None) -> dict[str, np.ndarray]:
+    """The mixed scenario's simplified model: the paper's two, each in its valve state.
+
+    The pitch-plane model (eqs. 15-24) on the paving (:func:`mixed_pitch_plane_model`)
+    in the ride state and the handling model (eqs. 12-14) on the lane change (``inputs``
+    from the full mixed run) in the handling state (:func:`mixed_handling_settings`).
+    f = (f_ride + f_hand) / 2 as the full run's (eqs. 9, 10); g (eq. 11) from the
+    fraction of time each tyre is off the ground over both windows,
+    ``(p_r T_r + p_h T_h) / (T_r + T_h)``, with T_r the ride window after the settling
+    and T_h the manoeuvre window: the full run's g also counts the smooth road between
+    them, where no tyre lifts, so its g is lower by a near-constant amount that eq. 25's
+    offset takes up.
+
+    Returns
+    -------
+    dict
+        'f' (batch,), 'g' and 'g_soft' (batch, 4) FL, FR, RL, RR, and the metrics of
+        both models ('a_rms_driver_mps2', 'a_rms_passenger_mps2', 'roll_first_peak_deg',
+        'roll_rate_rms_deg_s').
+    """
+    xb = validate_design(x, n_vars)
+    ride_model = mixed_pitch_plane_model(road)
+    ride = ride_model.evaluate(xb, n_vars, space)
+    hand = handling_model().evaluate_settings(
+        mixed_handling_settings(to_physical(xb, n_vars, space)), inputs)
+    t_ride = ride_model.setup.duration_s - ride_model.setup.settle_s
+    t_hand = inputs.manoeuvre_s[1] - inputs.manoeuvre_s[0]
+    out = {k: v for k, v in ride.items() if k not in GROUPED}
+    out.update({k: v for k, v in hand.items() if k not in GROUPED})
+    out['f'] = 0.5 * (np.asarray(ride['f']) + np.asarray(hand['f']))
+    for key in ('g', 'g_soft'):  # eq. 11 and its smooth count (metrics.py), alike
+        p_ride = np.asarray(ride[key]) / 10.0 + TYRE_HOP_MAX_FRACTION
+        p_hand = np.asarray(hand[key]) / 10.0 + TYRE_HOP_MAX_FRACTION
+        p = (p_ride * t_ride + p_hand * t_hand) / (t_ride + t_hand)
+        out[key] = 10.0 * (p - TYRE_HOP_MAX_FRACTION)
+    return out
+
+
+#: Outputs of both simplified models that the mixed model combines, not copies.
+GROUPED = ('f', 'g', 'g_soft')
