@@ -51,6 +51,7 @@ from suspension_tuning.vehicle.design import (
     validate_design,
 )
 from suspension_tuning.vehicle.params import INTEGRATORS
+from suspension_tuning.vehicle.simplified import INPUT_SCENARIOS, SIMPLIFIED_SCENARIOS
 
 Array = NDArray[np.float64]
 
@@ -74,11 +75,10 @@ CONSTRAINT_SCENARIOS = ('ride', 'handling', 'mixed')
 OBJECTIVE_NAMES = {'ride': 'f_ride', 'handling': 'f_hand', 'mixed': 'f_mixed'}
 #: Names of the eq. 11 tyre-hop constraints in a constraint (FL, FR, RL, RR).
 TYRE_HOP_NAMES = ('g_fl', 'g_fr', 'g_rl', 'g_rr')
-#: Scenarios with an eq. 25-scaled simplified model of f and g (paper section 6; 'mixed':
-#: both of the paper's, each in its valve state, ``vehicle.simplified``).
-SIMPLIFIED_SCENARIOS = ('ride', 'handling', 'mixed')
-#: Scenarios whose simplified model needs the full run's inputs (steer, slip angles).
-INPUT_SCENARIOS = ('handling', 'mixed')
+# SIMPLIFIED_SCENARIOS: scenarios with an eq. 25-scaled simplified model of f and g
+# (paper section 6; 'mixed': both of the paper's, each in its valve state);
+# INPUT_SCENARIOS: those whose simplified model needs the full run's inputs (steer, slip
+# angles).  Both from vehicle.simplified, imported above.
 
 
 @dataclass

@@ -529,9 +529,9 @@ class SimulationPool:
             usable = sum(self._usable(w) for w in self.workers.values())
         # Sizes differing by one design at most: 16 designs for 2 workers are 6 pieces
         # of 3, 3, 3, 3, 2 and 2, which fall 8 and 8 on two equal workers.
-        count = min(len(designs), max(1, usable) * self.pieces_per_worker)
-        if scenario == 'mixed':  # closed-loop over ROS: one design per request
-            count = len(designs)
+        # The mixed scenario closes its valve loop over ROS: one design per request.
+        count = (len(designs) if scenario == 'mixed'
+                 else min(len(designs), max(1, usable) * self.pieces_per_worker))
         if conditions is None:
             pieces = np.array_split(np.arange(len(designs)), count)
             piece_condition = [''] * len(pieces)
