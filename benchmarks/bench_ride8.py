@@ -1,14 +1,21 @@
-"""Benchmark of the 8-variable ride and handling (preset ride8): ours against the peers.
+"""Benchmark of the 8-variable cases (ride, handling, the two states): ours against the peers.
 
 The case: the ride scenario (eq. 9 with the eq. 11 tyre-hop constraints; default) or,
 with ``--scenario handling``, the handling one (eq. 10 with the eq. 11 constraints) on
 the 8-variable preset of config/design_space.yaml (``ride8``: the compression and
 rebound scale factors of the damper table and the static gas volume per axle, and both
-anti-roll bars; docs/design_space.md).  The pitch-plane model that gives the ride's
+anti-roll bars; docs/design_space.md).  ``--scenario mixed``: the 4S4's two states
+tuned together on the mixed scenario (the paving in the ride state, the lane change in
+the handling state, the valve controller switching between them; f the mean of eqs. 9
+and 10, eq. 11 over the whole run), the preset ``two_state8`` of the configuration
+folder ``suspension_tuning.studies.two_state`` writes (per axle the soft and stiff gas
+volume, the low and high dpsf; docs/design_space.md), written to a temporary folder
+before the models load.  The pitch-plane model that gives the ride's
 gradients sees the split damper and the gas volumes, not the bars: their columns are
 seeded with one full run each and then learnt by the secant correction
 (optim/correction.py).  The handling model sees all 8 (the bars in eq. 14's roll
-moment).  Lines are prefixed ``ride8_`` or ``handling8_``.
+moment).  The mixed case's simplified model is both (vehicle.simplified.run_mixed_simplified).
+Lines are prefixed ``ride8_``, ``handling8_`` or ``mixed8_``.
 
 What it runs from the 6 benchmark starts (``method_benchmark.benchmark_starts(8)``:
 'baseline', 'centre' and 4 seeded Latin-hypercube points), on the fixed-step model and,
@@ -31,14 +38,14 @@ full runs to solve over ours; ``..._paid``: over ours plus the calibration.
 ``ratio_by_n``: the same ratio against COBYLA (and the other peers run) for the ride
 with n = 2, 4 and 8 variables (``--ratio-n``), each against its reference.
 
-The references are in benchmarks/references.json (cases ``ride_8var`` and
-``handling_8var``), written by ``.venv/bin/python benchmarks/bench_ride8.py
---write-reference [--scenario handling]`` (the method study's
+The references are in benchmarks/references.json (cases ``ride_8var``,
+``handling_8var`` and ``mixed_8var``), written by ``.venv/bin/python
+benchmarks/bench_ride8.py --write-reference [--scenario handling|mixed]`` (the method study's
 search: a 3^8 grid, then SLSQP polish from its best points and from the designs
 Dynamic-Q with full and with simplified gradients reaches from the 6 starts; best
 feasible point seen, max g <= 1e-3).
 
-Run: .venv/bin/python benchmarks/bench_ride8.py [--scenario ride|handling]
+Run: .venv/bin/python benchmarks/bench_ride8.py [--scenario ride|handling|mixed]
 [--peers cobyla|all] [--noisy] [--ratio-n 2 4 8] [--jobs N]
 """
 
@@ -46,24 +53,55 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+import sys
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from suspension_tuning.optim.simplified_gradient import (
+
+def two_state_folder(argv: list[str]) -> Path | None:
+    """``--scenario mixed``: write the two-state configuration folder and name it.
+
+    The mixed case tunes the 4S4's two states (``suspension_tuning.studies.two_state``:
+    preset ``two_state8``, the 271 m paving), which live in a configuration folder of
+    their own; the models read the folder when they are imported, so it is written (in
+    a temporary folder, removed at exit) and named by ``SUSPENSION_TUNING_CONFIG_DIR``
+    before the imports below.
+    """
+    early = argparse.ArgumentParser(add_help=False)
+    early.add_argument('--scenario', default='ride')
+    if early.parse_known_args(argv)[0].scenario != 'mixed':
+        return None
+    from suspension_tuning.paths import CONFIG_DIR_VARIABLE
+    from suspension_tuning.studies.two_state import write_config
+
+    holder = tempfile.TemporaryDirectory(prefix='two_state_')
+    TEMPORARY.append(holder)
+    folder = write_config(Path(holder.name) / 'config')
+    os.environ[CONFIG_DIR_VARIABLE] = str(folder)
+    return folder
+
+
+TEMPORARY: list[tempfile.TemporaryDirectory] = []
+TWO_STATE_FOLDER = two_state_folder(sys.argv[1:])
+
+# The models read the configuration folder when imported: after two_state_folder.
+from suspension_tuning.optim.simplified_gradient import (  # noqa: E402
     SimplifiedGradient,
     calibrate,
     run_calibration_samples,
 )
-from suspension_tuning.studies import common
-from suspension_tuning.studies import method_benchmark as mb
-from suspension_tuning.studies.peer_study import SHORT, data_profile
-from suspension_tuning.studies.peers import PEER_BUDGET, PEERS, install_study_extra
-from suspension_tuning.vehicle.design import load_design_space
-from suspension_tuning.vehicle.scenarios import run_scenario
+from suspension_tuning.studies import common  # noqa: E402
+from suspension_tuning.studies import method_benchmark as mb  # noqa: E402
+from suspension_tuning.studies.peer_study import SHORT, data_profile  # noqa: E402
+from suspension_tuning.studies.peers import PEER_BUDGET, PEERS, install_study_extra  # noqa: E402
+from suspension_tuning.vehicle.design import load_design_space  # noqa: E402
+from suspension_tuning.vehicle.runs import run_full as run_model  # noqa: E402
 
-SCENARIOS = ('ride', 'handling')
+SCENARIOS = ('ride', 'handling', 'mixed')
 N_VARS = 8
 NOISY = 'variable_step'
 REFERENCES = Path(__file__).resolve().parent / 'references.json'
@@ -103,7 +141,7 @@ def run_case(scenario: str, n_vars: int, integrator: str, peers: tuple[str, ...]
     t0 = time.perf_counter()
     n_samples = run_calibration_samples(scenario, n_vars, samples)
     scaling = calibrate(scenario, n_vars, n_samples=n_samples,
-                        run_full=lambda sc, x: run_scenario(sc, x, integrator=integrator)
+                        run_full=lambda sc, x: run_model(sc, x, integrator=integrator)
                         ) if n_samples else None
     cal_wall = time.perf_counter() - t0
     gradient = SimplifiedGradient(scenario, n_vars, scaling, common.FD_STEP)
@@ -251,9 +289,9 @@ def main() -> None:
                         help="comma-separated peers, or 'all' (default cobyla)")
     parser.add_argument('--noisy', action='store_true',
                         help='the variable-step model too')
-    parser.add_argument('--ratio-n', type=int, nargs='*', default=[2, 4, 8],
-                        help='sizes of the ratio_by_n lines (default 2 4 8; the '
-                             '8-variable lines need 8)')
+    parser.add_argument('--ratio-n', type=int, nargs='*', default=None,
+                        help='sizes of the ratio_by_n lines (default 2 4 8; mixed: 8, the '
+                             'two-state preset; the 8-variable lines need 8)')
     parser.add_argument('--jobs', type=int, default=1, help='(reserved) worker processes')
     parser.add_argument('--plot-dir', type=Path, metavar='DIR',
                         help='write the 8-variable data profiles (method_peers_<scenario>'
@@ -274,14 +312,19 @@ def main() -> None:
     t0 = time.perf_counter()
     scenario = args.scenario
     print(f'{scenario}{N_VARS}_peers: {",".join(peers)}')
+    if TWO_STATE_FOLDER is not None:
+        print(f'{scenario}{N_VARS}_design: preset two_state8 of {TWO_STATE_FOLDER} '
+              '(suspension_tuning.studies.two_state)')
+    sizes = args.ratio_n if args.ratio_n is not None else (
+        [N_VARS] if scenario == 'mixed' else [2, 4, N_VARS])
     cases = {}
-    for n in sorted(set(args.ratio_n)):
+    for n in sorted(set(sizes)):
         cases[n] = run_case(scenario, n, mb.REFERENCE_INTEGRATOR, peers, args.jobs,
                             samples=args.calibration_samples)
         print(f'{scenario}{n}_reference_f: {cases[n]["reference"].f:.6f}', flush=True)
     if N_VARS in cases:
         print_case(scenario, cases[N_VARS], '')
-    for n in sorted(args.ratio_n):
+    for n in sorted(set(sizes)):
         out = cases[n]
         p = out['peers']
         ours = out['summaries']['dq_simplified']['median_full_runs']

@@ -68,19 +68,16 @@ def _check_run(scenario: str, n_vars: int, x: ArrayLike, settings: CheckSettings
     """One design's run at the check's tolerance (in ``condition``: its vehicle, speeds)."""
     from suspension_tuning.conditions import condition_params, condition_scenarios
     from suspension_tuning.vehicle.params import load_vehicle_params, with_integrator
-    from suspension_tuning.vehicle.scenarios import run_scenario
+    from suspension_tuning.vehicle.runs import run_full
 
     settings = load_check_settings() if settings is None else settings
     params = with_integrator(load_vehicle_params(), 'variable_step', rtol=settings.rtol,
                              atol=settings.atol)
-    if scenario == 'mixed':  # in-process valve controllers (the same bits as over ROS)
-        from suspension_tuning.vehicle.design import validate_design
-        from suspension_tuning.vehicle.mixed import run_mixed
-
-        return run_mixed(validate_design(x, n_vars), params=params)
-    return run_scenario(scenario, np.asarray(x, float)[None, :],
-                        params=condition_params(condition, params), n_vars=n_vars,
-                        config=condition_scenarios(condition), integrator='variable_step')
+    # 'mixed': in-process valve controllers (the same bits as over ROS); no conditions
+    return run_full(scenario, np.asarray(x, float)[None, :],
+                    params=condition_params(condition, params), n_vars=n_vars,
+                    config=None if condition is None else condition_scenarios(condition),
+                    integrator='variable_step')
 
 
 def check_options(scenario: str, n_vars: int, settings: CheckSettings | None = None

@@ -24,7 +24,7 @@ from suspension_tuning.vehicle.params import (
     load_vehicle_params,
     with_integrator,
 )
-from suspension_tuning.vehicle.scenarios import SCENARIOS as MODEL_SCENARIOS
+from suspension_tuning.vehicle.runs import SCENARIOS as MODEL_SCENARIOS
 from suspension_tuning.vehicle.scenarios import ScenarioResult, run_scenario
 
 Array = NDArray[np.float64]
@@ -56,7 +56,7 @@ class DesignEvaluation:
 
 def scenarios() -> tuple[str, ...]:
     """Names of the full-model scenarios ('mixed': closed-loop valve control)."""
-    return (*MODEL_SCENARIOS, 'mixed')
+    return MODEL_SCENARIOS
 
 
 def parse_designs(scenario: str, n_vars: int, flat: Sequence[float],

@@ -117,3 +117,38 @@ def test_the_answer_check_runs_the_mixed_scenario_at_its_tighter_tolerance() -> 
     # the two integrators agree within a few per cent on f (3.4 % measured at the
     # two-state answer of docs/design_space.md)
     assert f == pytest.approx(fixed.f[0], rel=0.1)
+
+
+def test_run_full_runs_the_mixed_scenario_as_run_mixed_does() -> None:
+    from suspension_tuning.vehicle.params import load_vehicle_params, with_integrator
+    from suspension_tuning.vehicle.runs import run_full
+
+    x = np.array([[0.4, 0.6, 0.5, 0.5]])
+    # one dispatcher for every scenario: the same closed-loop run, bit for bit
+    direct = run_mixed(x, params=with_integrator(load_vehicle_params(), 'fixed_step'))
+    dispatched = run_full('mixed', x, integrator='fixed_step')
+    assert np.array_equal(dispatched.f, direct.f)
+    assert np.array_equal(dispatched.g, direct.g)
+    with pytest.raises(ValueError, match='valid scenarios: ride, handling, mixed'):
+        run_full('rally', x)
+
+
+def test_a_grid_design_whose_run_fails_is_infeasible_and_listed(monkeypatch) -> None:
+    from suspension_tuning.studies import common
+
+    def run(scenario, designs, n_vars=None, integrator=None):
+        if np.any(designs[:, 0] < 0.01):  # stands in for a run whose state turns NaN
+            raise ValueError('vehicle state must be finite, got (nan, ...)')
+
+        class Result:
+            f = designs.sum(axis=1)
+            g = -np.ones((len(designs), 4))
+        return Result()
+
+    monkeypatch.setattr(common, 'run_full', run)
+    designs = np.array([[0.5, 0.5], [0.001, 0.5], [1.0, 0.5]])
+    f, g, failed = common.grid_batch('ride', designs, 2)
+    # the good designs keep their values; the failed one can never be feasible
+    assert f.tolist() == [1.0, np.inf, 1.5]
+    assert np.all(g[1] == np.inf) and np.all(g[[0, 2]] == -1.0)
+    assert failed == [{'x': [0.001, 0.5], 'error': 'vehicle state must be finite, got (nan, ...)'}]

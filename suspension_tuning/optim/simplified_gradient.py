@@ -240,26 +240,18 @@ def calibrate(
     """
     x, n_samples, seed = calibration_designs(n_vars, n_samples, seed)
     if run_full is None:
-        if condition:
-            from suspension_tuning.conditions import (
-                Condition,
-                condition_params,
-                condition_scenarios,
-            )
-            from suspension_tuning.vehicle.scenarios import run_scenario
+        from suspension_tuning.conditions import (
+            Condition,
+            condition_params,
+            condition_scenarios,
+        )
+        from suspension_tuning.vehicle.runs import run_full as run_model
 
-            parsed = Condition.from_text(condition)
+        parsed = Condition.from_text(condition) if condition else None
 
-            def run_full(name: str, designs: Array) -> Any:
-                return run_scenario(name, designs, condition_params(parsed),
-                                    config=condition_scenarios(parsed), space=space)
-        elif scenario == 'mixed':
-            from suspension_tuning.vehicle.mixed import run_mixed
-
-            def run_full(name: str, designs: Array) -> Any:
-                return run_mixed(designs, space=space)
-        else:
-            from suspension_tuning.vehicle.scenarios import run_scenario as run_full
+        def run_full(name: str, designs: Array) -> Any:
+            return run_model(name, designs, condition_params(parsed), space=space,
+                             config=None if parsed is None else condition_scenarios(parsed))
     res = run_full(scenario, x)
     inputs = [SimplifiedInputs.from_scenario_result(res, i) for i in range(n_samples)]
     key = scaling_key(scenario, n_vars, n_samples, seed, model_fingerprint)

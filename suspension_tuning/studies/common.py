@@ -68,7 +68,7 @@ from suspension_tuning.vehicle.design import (
     validate_design,
 )
 from suspension_tuning.vehicle.params import integrator_name
-from suspension_tuning.vehicle.scenarios import run_scenario
+from suspension_tuning.vehicle.runs import run_full
 
 Array = NDArray[np.float64]
 
@@ -638,6 +638,35 @@ def grid_designs(n_vars: int, points: int) -> Array:
     return np.column_stack([m.ravel() for m in mesh])
 
 
+def grid_batch(scenario: str, designs: Array, n_vars: int, integrator: str | None = None
+               ) -> tuple[Array, Array, list[dict[str, Any]]]:
+    """f (m,) and g (m, k) of a batch of grid designs; a design whose run fails is infeasible.
+
+    A grid reaches the corners of the box, where a run can fail (in the two-state
+    design, the smallest gas volumes of both states with the least damping on the
+    Belgian paving: the gas pressure grows without bound and the fixed-step integration
+    diverges, so a state turns NaN).  The batch then runs design by design; a design
+    that fails alone gets f = inf and g = inf (never feasible, never a polish start),
+    and is listed with its error.
+    """
+    try:
+        res = run_full(scenario, designs, n_vars=n_vars, integrator=integrator)
+        return np.asarray(res.f, float), np.asarray(res.g, float), []
+    except ValueError:
+        pass
+    f, g, failed = [], [], []
+    for x in designs:
+        try:
+            res = run_full(scenario, x[None, :], n_vars=n_vars, integrator=integrator)
+            f.append(float(res.f[0]))
+            g.append(np.asarray(res.g[0], float))
+        except ValueError as exc:
+            f.append(math.inf)
+            g.append(np.full_like(g[0] if g else np.zeros(4), math.inf))
+            failed.append({'x': np.round(x, 6).tolist(), 'error': str(exc)[:200]})
+    return np.array(f), np.vstack(g), failed
+
+
 def reference_optimum(
     scenario: str,
     n_vars: int,
@@ -677,13 +706,12 @@ def reference_optimum(
     """
     t0 = time.perf_counter()
     grid = grid_designs(n_vars, points)
-    f_grid, g_grid = [], []
+    f_grid, g_grid, failed = [], [], []
     for k in range(0, len(grid), GRID_BATCH):
-        res = run_scenario(
-            scenario, grid[k : k + GRID_BATCH], n_vars=n_vars, integrator=integrator
-        )
-        f_grid.append(np.asarray(res.f, float))
-        g_grid.append(np.asarray(res.g, float))
+        f, g, bad = grid_batch(scenario, grid[k : k + GRID_BATCH], n_vars, integrator)
+        f_grid.append(f)
+        g_grid.append(g)
+        failed += bad
     f_grid, g_grid = np.concatenate(f_grid), np.vstack(g_grid)
     feasible = np.max(g_grid, axis=1) <= gtol
     if not feasible.any():
@@ -743,6 +771,7 @@ def reference_optimum(
             'grid_spacing': spacing,
             'grid_best_f': float(f_grid[order[0]]),
             'grid_best_x': grid[order[0]].tolist(),
+            'grid_failed': failed,
             'polished_from_grid_best_f': min(polished['grid'], default=math.inf),
             'polished_from_methods_best_f': min(polished['method'], default=math.inf),
             'gtol': gtol,

@@ -57,7 +57,7 @@ from suspension_tuning.optim.simplified_gradient import (
 )
 from suspension_tuning.studies import common
 from suspension_tuning.studies.peers import PEER_BUDGET, PEERS
-from suspension_tuning.vehicle.scenarios import run_scenario
+from suspension_tuning.vehicle.runs import run_full as run_model
 
 Array = NDArray[np.float64]
 
@@ -277,7 +277,7 @@ def search_reference(scenario: str, n_vars: int, grid_points: int | None = None,
     points = common.GRID_POINTS[n_vars] if grid_points is None else grid_points
     integrator = REFERENCE_INTEGRATOR
     scaling = calibrate(scenario, n_vars, n_samples=calibration_samples,
-                        run_full=lambda sc, x: run_scenario(sc, x, integrator=integrator))
+                        run_full=lambda sc, x: run_model(sc, x, integrator=integrator))
     gradient = SimplifiedGradient(scenario, n_vars, scaling, common.FD_STEP)
     finals: dict[bytes, Array] = {}
     method_f: dict[str, float] = {}
@@ -302,6 +302,7 @@ def search_reference(scenario: str, n_vars: int, grid_points: int | None = None,
         'grid_points_per_axis': points,
         'grid_runs': d['grid_runs'],
         'grid_best_f': d['grid_best_f'],
+        'grid_failed': d['grid_failed'],
         'polish': ('SciPy SLSQP (maxiter 100, ftol 1e-6, 2-point differences with step '
                    f'{d["polish_eps"]:.3g}) from the {common.POLISH_STARTS} best feasible grid '
                    'points and from the distinct designs of Dynamic-Q with full-model and '
@@ -390,7 +391,7 @@ class FixedStepJudge:
                        .values())
         for k in range(0, len(missing), JUDGE_BATCH):
             batch = np.array(missing[k:k + JUDGE_BATCH])
-            res = run_scenario(self.scenario, batch, n_vars=self.n_vars,
+            res = run_model(self.scenario, batch, n_vars=self.n_vars,
                                integrator=REFERENCE_INTEGRATOR)
             for xi, f, g in zip(batch, res.f, res.g):
                 self.values[xi.tobytes()] = (float(f), np.asarray(g, float).copy())
@@ -810,7 +811,7 @@ def run_benchmark(scenario: str, n_vars: int, integrator: str, reference: Refere
     judge = FixedStepJudge(scenario, n_vars)
     t0 = time.perf_counter()
     scaling = calibrate(scenario, n_vars, n_samples=calibration_samples,
-                        run_full=lambda sc, x: run_scenario(sc, x, integrator=integrator)
+                        run_full=lambda sc, x: run_model(sc, x, integrator=integrator)
                         ) if calibration_samples else None
     cal_wall = time.perf_counter() - t0
     gradient = SimplifiedGradient(scenario, n_vars, scaling, common.FD_STEP)

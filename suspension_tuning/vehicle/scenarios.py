@@ -155,7 +155,8 @@ def run_scenario(
     Parameters
     ----------
     name : {'ride', 'handling'}
-        Scenario (the mixed one: :func:`suspension_tuning.evaluation.evaluate`).
+        Scenario (every scenario, the closed-loop mixed one too:
+        :func:`suspension_tuning.vehicle.runs.run_full`).
     x : np.ndarray
         Normalised design(s), shape (n_vars,) or (batch, n_vars), n_vars 2 or 4
         (paper eqs. 4-8; 0.001 <= x <= 1).
