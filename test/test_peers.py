@@ -70,3 +70,31 @@ def test_a_peer_stops_at_the_budget_and_at_a_stop_condition():
 def test_an_unknown_peer_is_refused():
     with pytest.raises(ValueError, match='unknown peer'):
         peers.minimise('gp', f_and_g, PROBLEM['x0'], LOWER, UPPER)
+
+
+@pytest.mark.parametrize('method', peers.PEERS)
+def test_a_peer_goes_on_past_runs_that_fail(method):
+    # a corner of the box where the model fails (f = g = inf, as FullModelCache gives a
+    # run whose state turns non-finite): every peer treats it as a bad point and still
+    # improves on the start; the failed runs count
+    def failing(x):
+        if x[0] < 0.3:
+            return np.inf, np.array([np.inf])
+        return f_and_g(x)
+
+    run = peers.minimise(method, failing, PROBLEM['x0'], LOWER, UPPER, 60)
+    assert run.best_feasible(gtol=1e-6)['f'] < F0
+    assert 1 <= len(run.evaluations) <= 60
+
+
+def test_the_study_model_counts_a_failed_run_as_infeasible(monkeypatch):
+    from suspension_tuning.studies import common
+
+    def evaluate(scenario, designs, integrator=None):
+        raise ValueError('vehicle state must be finite, got (nan, ...)')
+
+    monkeypatch.setattr(common, 'evaluate', evaluate)
+    model = common.FullModelCache('mixed', 4)
+    f, g = model(np.full(4, 0.001))
+    assert f == np.inf and g.shape == (4,) and np.all(g == np.inf)
+    assert model.n_runs == 1 and model.failed[0]['x'] == [0.001] * 4

@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import OptimizeResult, minimize
 
 from suspension_tuning.evaluation import evaluate
+from suspension_tuning.metric_names import TYRES
 from suspension_tuning.model_identity import builtin_fingerprint
 from suspension_tuning.optim.dynamic_q import load_options
 from suspension_tuning.optim.simplified_gradient import SimplifiedGradient
@@ -226,6 +227,11 @@ class FullModelCache:
     budget : int, optional
         Distinct designs allowed; one more raises
         :class:`~suspension_tuning.studies.peers.BudgetExhaustedError`.
+
+    A design whose run fails (its state turns non-finite: the two-state design's
+    smallest gas volumes with the least damping, :func:`grid_batch`) counts as a run
+    and gives f = inf and g = inf, never feasible: the extreme barrier that SciPy's
+    COBYLA and COBYQA apply to such values; it is listed in ``failed``.
     """
 
     def __init__(self, scenario: str, n_vars: int, integrator: str | None = None,
@@ -235,6 +241,7 @@ class FullModelCache:
         self.integrator = integrator
         self.budget = budget
         self.values: dict[bytes, tuple[float, Array]] = {}
+        self.failed: list[dict[str, Any]] = []
 
     @property
     def n_runs(self) -> int:
@@ -248,8 +255,13 @@ class FullModelCache:
         if key not in self.values:
             if self.budget is not None and self.n_runs >= self.budget:
                 raise BudgetExhaustedError(f'budget of {self.budget} full runs spent')
-            result = evaluate(self.scenario, xv[None, :], integrator=self.integrator)
-            self.values[key] = (float(result.f[0]), np.asarray(result.g[0], float).copy())
+            try:
+                result = evaluate(self.scenario, xv[None, :], integrator=self.integrator)
+            except ValueError as exc:  # the design was checked: the run failed
+                self.values[key] = (math.inf, np.full(len(TYRES), math.inf))
+                self.failed.append({'x': np.round(xv, 6).tolist(), 'error': str(exc)[:200]})
+            else:
+                self.values[key] = (float(result.f[0]), np.asarray(result.g[0], float).copy())
         return self.values[key]
 
 
@@ -662,7 +674,7 @@ def grid_batch(scenario: str, designs: Array, n_vars: int, integrator: str | Non
             g.append(np.asarray(res.g[0], float))
         except ValueError as exc:
             f.append(math.inf)
-            g.append(np.full_like(g[0] if g else np.zeros(4), math.inf))
+            g.append(np.full(len(TYRES), math.inf))
             failed.append({'x': np.round(x, 6).tolist(), 'error': str(exc)[:200]})
     return np.array(f), np.vstack(g), failed
 

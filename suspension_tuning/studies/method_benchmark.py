@@ -391,9 +391,10 @@ class FixedStepJudge:
                        .values())
         for k in range(0, len(missing), JUDGE_BATCH):
             batch = np.array(missing[k:k + JUDGE_BATCH])
-            res = run_model(self.scenario, batch, n_vars=self.n_vars,
-                               integrator=REFERENCE_INTEGRATOR)
-            for xi, f, g in zip(batch, res.f, res.g):
+            # a design whose fixed-step run fails is judged infeasible (f = g = inf)
+            f_batch, g_batch, _ = common.grid_batch(self.scenario, batch, self.n_vars,
+                                                    REFERENCE_INTEGRATOR)
+            for xi, f, g in zip(batch, f_batch, g_batch):
                 self.values[xi.tobytes()] = (float(f), np.asarray(g, float).copy())
         f = np.array([self.values[xi.tobytes()][0] for xi in x])
         g = np.array([self.values[xi.tobytes()][1] for xi in x])

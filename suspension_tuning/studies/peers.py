@@ -198,6 +198,8 @@ def _nomad(problem: CountedProblem, x0: Array) -> str:
             f, g = problem(x)
         except StopRunError:
             return 0  # a failed evaluation, not run: NOMAD goes on to its MAX_BB_EVAL
+        if not np.isfinite(f):
+            return 0  # a run that failed (counted): a failed evaluation for NOMAD
         point.setBBO(' '.join(repr(float(v)) for v in (f, *g)).encode('utf-8'))
         return 1
 
@@ -226,10 +228,13 @@ def _optuna_tpe(problem: CountedProblem, x0: Array, seed: int = OPTUNA_SEED) -> 
         x = [trial.suggest_float(name, lo, hi)
              for name, lo, hi in zip(names, problem.lower, problem.upper)]
         f, g = problem(x)
+        trials += 1
+        if not np.isfinite(f):  # a run that failed (counted): a failed trial for TPE
+            study.tell(trial, state=optuna.trial.TrialState.FAIL)
+            continue
         for k, value in enumerate(g):
             trial.set_constraint(f'g{k}', float(value))
         study.tell(trial, f)
-        trials += 1
     return f'{trials} trials'
 
 
