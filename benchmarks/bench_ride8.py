@@ -196,7 +196,9 @@ def print_case(scenario: str, out: dict, suffix: str) -> None:
         m = out['summaries'][peer]
         print(f'peer_median_full_runs_{peer}_{case}{suffix}: {runs(median)} '
               f'({m["starts_solved"]} of {len(out["starts"])} solved)')
-    print(f'peer_best_{case}{suffix}: {p["best_peer"]}')
+    print(f'peer_best_{case}{suffix}: '
+          + (p['best_peer'] if math.isfinite(p['peer_best_full_runs'])
+             else 'none (no peer solves the median start)'))
     print(f'peer_best_full_runs_{case}{suffix}: {runs(p["peer_best_full_runs"])}')
     print(f'full_runs_ratio_vs_best_peer_{case}{suffix}: '
           f'{ratio_text(p["full_runs_ratio_vs_best_peer"], ours, p)}')
