@@ -152,3 +152,19 @@ def test_a_grid_design_whose_run_fails_is_infeasible_and_listed(monkeypatch) -> 
     assert f.tolist() == [1.0, np.inf, 1.5]
     assert np.all(g[1] == np.inf) and np.all(g[[0, 2]] == -1.0)
     assert failed == [{'x': [0.001, 0.5], 'error': 'vehicle state must be finite, got (nan, ...)'}]
+
+
+def test_a_diverging_mixed_run_names_the_design_and_the_time(tmp_path) -> None:
+    from suspension_tuning.vehicle.mixed import load_mixed_config
+    from suspension_tuning.vehicle.runs import run_full
+
+    folder = write_config(tmp_path / 'cfg')
+    space = load_design_space(folder / 'design_space.yaml')
+    # a corner of the two-state grid whose run diverges on the 271 m paving
+    # (benchmarks/references.json, mixed_8var grid_failed): the smallest front gas
+    # volumes of both states with the least damping
+    corner = [0.001, 0.001, 0.001, 1.0, 1.0, 0.001, 0.001, 0.001]
+    x = np.array([[0.5] * 8, corner])
+    with pytest.raises(ValueError, match=r'diverged at t = .* design 1 \(x = \[0.001'):
+        run_full('mixed', x, config=load_mixed_config(folder / 'mixed.yaml'), space=space,
+                 integrator='fixed_step')

@@ -126,6 +126,20 @@ def vehicle_state(outputs: dict[str, np.ndarray], index: int, step: int,
             'strut_pressure_pa': tuple(float(p) for p in outputs['strut_pressure_pa'][index])}
 
 
+def _diverged(outputs: dict[str, np.ndarray], x: np.ndarray, t_s: float
+              ) -> ValueError | None:
+    """The error of a run whose state is no longer finite (None while it is)."""
+    batch = len(x)
+    finite = np.all(np.isfinite(np.column_stack(
+        [np.asarray(v, float).reshape(batch, -1) for v in outputs.values()])), axis=1)
+    if finite.all():
+        return None
+    rows = ', '.join(f'{i} (x = {np.round(x[i], 4).tolist()})' for i in np.flatnonzero(~finite))
+    return ValueError(f'the mixed run diverged at t = {t_s:.2f} s: the vehicle state of '
+                      f'design {rows} is no longer finite (the strut gas pressure grows '
+                      'without bound at the smallest gas volumes with the least damping)')
+
+
 def run_mixed(x: np.ndarray, controllers: list[Controller] | None = None,
               params: VehicleParams | None = None, config: dict[str, Any] | None = None,
               valve_period_s: float | None = None,
@@ -197,8 +211,11 @@ def run_mixed(x: np.ndarray, controllers: list[Controller] | None = None,
     wall = time.perf_counter()
     for k in range(n_periods):
         outputs = model.outputs()
-        new = np.array([controllers[i](k, vehicle_state(outputs, i, k, period))
-                        for i in range(batch)])
+        try:
+            new = np.array([controllers[i](k, vehicle_state(outputs, i, k, period))
+                            for i in range(batch)])
+        except ValueError as exc:
+            raise _diverged(outputs, xv, k * period) or exc from exc
         if not np.array_equal(new, actual):
             model.set_valve_state(
                 spring_soft=np.column_stack([new[:, 0] == SPRING_SOFT, new[:, 2] == SPRING_SOFT]),
