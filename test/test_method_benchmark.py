@@ -183,7 +183,7 @@ def test_slsqp_runs_keep_every_evaluation_in_order(monkeypatch):
             self.f = (x[:, 0] - 0.7) ** 2 + (x[:, 1] - 0.2) ** 2
             self.g = -np.ones((len(x), 4))
 
-    monkeypatch.setattr(common, 'evaluate', lambda sc, x, **kw: Result(np.asarray(x)))
+    monkeypatch.setattr(common, 'run_full', lambda sc, x, **kw: Result(np.asarray(x)))
     run, _ = common.run_slsqp('ride', 2, 'lhs0', record=False, x0=[0.3, 0.6])
     ev = run.evaluations
     assert ev[0]['x'] == [0.3, 0.6]  # x0 replaces the named start, evaluated first

@@ -147,7 +147,7 @@ def test_a_grid_design_whose_run_fails_is_infeasible_and_listed(monkeypatch) -> 
 
     monkeypatch.setattr(common, 'run_full', run)
     designs = np.array([[0.5, 0.5], [0.001, 0.5], [1.0, 0.5]])
-    f, g, failed = common.grid_batch('ride', designs, 2)
+    f, g, failed = common.run_designs('ride', designs, 2)
     # the good designs keep their values; the failed one can never be feasible
     assert f.tolist() == [1.0, np.inf, 1.5]
     assert np.all(g[1] == np.inf) and np.all(g[[0, 2]] == -1.0)

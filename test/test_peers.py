@@ -90,10 +90,10 @@ def test_a_peer_goes_on_past_runs_that_fail(method):
 def test_the_study_model_counts_a_failed_run_as_infeasible(monkeypatch):
     from suspension_tuning.studies import common
 
-    def evaluate(scenario, designs, integrator=None):
+    def run_full(scenario, designs, n_vars=None, integrator=None):
         raise ValueError('vehicle state must be finite, got (nan, ...)')
 
-    monkeypatch.setattr(common, 'evaluate', evaluate)
+    monkeypatch.setattr(common, 'run_full', run_full)
     model = common.FullModelCache('mixed', 4)
     f, g = model(np.full(4, 0.001))
     assert f == np.inf and g.shape == (4,) and np.all(g == np.inf)

@@ -33,7 +33,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import OptimizeResult, minimize
 
-from suspension_tuning.evaluation import evaluate
 from suspension_tuning.metric_names import TYRES
 from suspension_tuning.model_identity import builtin_fingerprint
 from suspension_tuning.optim.dynamic_q import load_options
@@ -228,10 +227,8 @@ class FullModelCache:
         Distinct designs allowed; one more raises
         :class:`~suspension_tuning.studies.peers.BudgetExhaustedError`.
 
-    A design whose run fails (its state turns non-finite: the two-state design's
-    smallest gas volumes with the least damping, :func:`grid_batch`) counts as a run
-    and gives f = inf and g = inf, never feasible: the extreme barrier that SciPy's
-    COBYLA and COBYQA apply to such values; it is listed in ``failed``.
+    A design whose run fails (:func:`run_designs`) counts as a run and gives f = inf
+    and g = inf, never feasible; it is listed in ``failed``.
     """
 
     def __init__(self, scenario: str, n_vars: int, integrator: str | None = None,
@@ -255,13 +252,10 @@ class FullModelCache:
         if key not in self.values:
             if self.budget is not None and self.n_runs >= self.budget:
                 raise BudgetExhaustedError(f'budget of {self.budget} full runs spent')
-            try:
-                result = evaluate(self.scenario, xv[None, :], integrator=self.integrator)
-            except ValueError as exc:  # the design was checked: the run failed
-                self.values[key] = (math.inf, np.full(len(TYRES), math.inf))
-                self.failed.append({'x': np.round(xv, 6).tolist(), 'error': str(exc)[:200]})
-            else:
-                self.values[key] = (float(result.f[0]), np.asarray(result.g[0], float).copy())
+            f, g, failed = run_designs(self.scenario, xv[None, :], self.n_vars,
+                                       self.integrator)
+            self.values[key] = (float(f[0]), g[0].copy())
+            self.failed += failed
         return self.values[key]
 
 
@@ -650,22 +644,24 @@ def grid_designs(n_vars: int, points: int) -> Array:
     return np.column_stack([m.ravel() for m in mesh])
 
 
-def grid_batch(scenario: str, designs: Array, n_vars: int, integrator: str | None = None
-               ) -> tuple[Array, Array, list[dict[str, Any]]]:
-    """f (m,) and g (m, k) of a batch of grid designs; a design whose run fails is infeasible.
+def run_designs(scenario: str, designs: Array, n_vars: int, integrator: str | None = None
+                ) -> tuple[Array, Array, list[dict[str, Any]]]:
+    """f (m,) and g (m, k) of checked designs (m, n); a design whose run fails is infeasible.
 
-    A grid reaches the corners of the box, where a run can fail (in the two-state
-    design, the smallest gas volumes of both states with the least damping on the
-    Belgian paving: the gas pressure grows without bound and the fixed-step integration
-    diverges, so a state turns NaN).  The batch then runs design by design; a design
-    that fails alone gets f = inf and g = inf (never feasible, never a polish start),
+    A grid, or a peer's poll, reaches the corners of the box, where a run can fail (in
+    the two-state design, the smallest gas volumes of both states with the least damping
+    on the Belgian paving: the gas pressure grows without bound and the fixed-step
+    integration diverges, so a state turns NaN).  A failed batch then runs design by
+    design; a design that fails alone gets f = inf and g = inf (never feasible, never a
+    polish start: the extreme barrier SciPy's COBYLA and COBYQA apply to such values)
     and is listed with its error.
     """
-    try:
-        res = run_full(scenario, designs, n_vars=n_vars, integrator=integrator)
-        return np.asarray(res.f, float), np.asarray(res.g, float), []
-    except ValueError:
-        pass
+    if len(designs) > 1:
+        try:
+            res = run_full(scenario, designs, n_vars=n_vars, integrator=integrator)
+            return np.asarray(res.f, float), np.asarray(res.g, float), []
+        except ValueError:
+            pass
     f, g, failed = [], [], []
     for x in designs:
         try:
@@ -720,7 +716,7 @@ def reference_optimum(
     grid = grid_designs(n_vars, points)
     f_grid, g_grid, failed = [], [], []
     for k in range(0, len(grid), GRID_BATCH):
-        f, g, bad = grid_batch(scenario, grid[k : k + GRID_BATCH], n_vars, integrator)
+        f, g, bad = run_designs(scenario, grid[k : k + GRID_BATCH], n_vars, integrator)
         f_grid.append(f)
         g_grid.append(g)
         failed += bad

@@ -392,7 +392,7 @@ class FixedStepJudge:
         for k in range(0, len(missing), JUDGE_BATCH):
             batch = np.array(missing[k:k + JUDGE_BATCH])
             # a design whose fixed-step run fails is judged infeasible (f = g = inf)
-            f_batch, g_batch, _ = common.grid_batch(self.scenario, batch, self.n_vars,
+            f_batch, g_batch, _ = common.run_designs(self.scenario, batch, self.n_vars,
                                                     REFERENCE_INTEGRATOR)
             for xi, f, g in zip(batch, f_batch, g_batch):
                 self.values[xi.tobytes()] = (float(f), np.asarray(g, float).copy())
