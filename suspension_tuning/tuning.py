@@ -500,7 +500,8 @@ def optimise(request: TuningRequest, full_model: FullModel,
 
     options = DynamicQOptions.from_mapping(request.options).as_dict()
     correction_options = CorrectionOptions.from_mapping(request.correction)
-    correct = request.gradient_source == 'simplified' and correction_options.method != 'none'
+    correct = (request.gradient_source == 'simplified'
+               and correction_options.applies_to(request.scenario))
     corrections: list[SecantCorrection | None] = [None]
     # Full-model values at every evaluated design (the history's too, when resumed):
     # the correction compares them with the simplified values at the same design.
@@ -702,8 +703,10 @@ def _finish(result: OptimizeResult, request: TuningRequest, terms: _ConstraintTe
             np.asarray(result.x_best, float).tobytes())
         if metrics is not None:
             result.update(metrics_best=dict(metrics))
+    off = CorrectionOptions.from_mapping(request.correction).off_for_scenarios
     result.update(correction=correction.summary() if correction is not None
-                  else {'method': 'none'})
+                  else {'method': 'none'} if request.scenario not in off
+                  else {'method': 'none', 'off_for_scenario': request.scenario})
     if check is not None:
         result.update(check=check)
     return result
@@ -1144,7 +1147,8 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
     staircase = (([False] * n_c if worst else []) + [True] * (4 * n_c)
                  + [spec.quantity in TYRE_HOP_NAMES for spec in specs for _ in range(n_c)])
     correction_options = CorrectionOptions.from_mapping(request.correction)
-    correct = request.gradient_source == 'simplified' and correction_options.method != 'none'
+    correct = (request.gradient_source == 'simplified'
+               and correction_options.applies_to(request.scenario))
     corrections: dict[str, SecantCorrection] = {}
     records: list[dict[str, Any]] = []
     #: added to the g rows (tyre hop, extra constraints) after a check found the answer

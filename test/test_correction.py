@@ -93,6 +93,24 @@ def test_the_correction_makes_no_full_run_of_its_own(method):
         np.testing.assert_allclose(result.correction['jacobian'][1], [1.0, 1.0], atol=0.05)
 
 
+def test_a_scenario_whose_objective_jumps_runs_without_the_correction():
+    # config/optimiser.yaml off_for_scenarios: [mixed] (the valve controller's switch
+    # pairs make the mixed objective jump).  The same problem posed as 'mixed' runs the
+    # paper's eq. 25 gradients alone, and the result says why; 'ride' is corrected.
+    assert not CorrectionOptions().applies_to('mixed')
+    assert CorrectionOptions().applies_to('ride')
+    assert not CorrectionOptions(method='none').applies_to('ride')
+    assert CorrectionOptions(off_for_scenarios=[]).applies_to('mixed')
+    with pytest.raises(ValueError, match='off_for_scenarios'):
+        CorrectionOptions(off_for_scenarios='mixed')
+    mixed = optimise(TuningRequest('mixed', 2, x0=[0.9, 0.9], gradient_source='simplified',
+                                   options=OPTIONS), full_model, flat_simplified)
+    assert mixed.correction == {'method': 'none', 'off_for_scenario': 'mixed'}
+    ride = optimise(TuningRequest('ride', 2, x0=[0.9, 0.9], gradient_source='simplified',
+                                  options=OPTIONS), full_model, flat_simplified)
+    assert ride.correction['method'] == 'secant' and ride.correction['n_updates'] >= 1
+
+
 def test_soft_tyre_hop_measure_by_hand():
     # w = 0.5 x 4000 N = 2000 N; samples 0, 1000, 2000, 4000 N count 1, 0.5, 0, 0:
     # mean 0.375, g = 10 (0.375 - 0.1) = 2.75; eq. 11 counts one sample in four:
