@@ -168,3 +168,23 @@ def test_a_diverging_mixed_run_names_the_design_and_the_time(tmp_path) -> None:
     with pytest.raises(ValueError, match=r'diverged at t = .* design 1 \(x = \[0.001'):
         run_full('mixed', x, config=load_mixed_config(folder / 'mixed.yaml'), space=space,
                  integrator='fixed_step')
+
+
+def test_the_valve_controller_makes_the_mixed_objective_jump_at_the_reference(
+        tmp_path, monkeypatch) -> None:
+    # Measured at the committed two-state reference (benchmarks/references.json,
+    # docs/design_space.md): a -0.025 move of the front high-state damping makes the
+    # controller switch 10 times instead of 8, and the closed-loop difference of f is
+    # then 32 times the one with the valve history held (-0.353 and -0.011 per unit);
+    # the front stiff volume changes no switch, and the two differences agree.
+    from suspension_tuning.studies.method_benchmark import reference_for
+    from suspension_tuning.studies.two_state import valve_jumps
+
+    monkeypatch.setenv('SUSPENSION_TUNING_CONFIG_DIR', str(write_config(tmp_path / 'cfg')))
+    out = valve_jumps(reference_for('mixed', 8).x)
+    damping, stiff = PRESET.index('dpsf_high_front'), PRESET.index('gas_volume_stiff_front')
+    assert out['switches_at_x'] == 8
+    assert out['switches'][damping].tolist() == [10, 8]
+    assert abs(out['df_closed'][damping]) > 10 * abs(out['df_held'][damping])
+    assert out['switches'][stiff].tolist() == [8, 8]
+    assert out['df_closed'][stiff] == pytest.approx(out['df_held'][stiff], rel=0.1)

@@ -34,9 +34,14 @@ program may write the folder and set the variable before it imports the models.
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import shutil
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from suspension_tuning.paths import config_dir
 
@@ -93,6 +98,56 @@ def write_config(out: str | Path, rough_length_m: float = MIXED_ROUGH_LENGTH_M) 
     return out
 
 
+def valve_jumps(x: Sequence[float], step: float = 0.025,
+                integrator: str = 'fixed_step') -> dict[str, Any]:
+    """Central differences of the mixed objective, closed loop and with the valves held.
+
+    Each variable of the design ``x`` (normalised) is moved by ``-step`` and ``+step``
+    (clipped to the box) and the mixed scenario run twice: closed loop (the valve
+    controller decides, as in every run) and with the valve history of the run at
+    ``x`` replayed, step for step, whatever the vehicle does.  The two differences
+    part where a move makes the controller switch otherwise: the closed-loop objective
+    jumps there (docs/design_space.md, the two-state case), which no simplified model
+    and no secant update represents.
+
+    Runs in the configuration folder of the process (``paths.config_dir``).
+
+    Returns
+    -------
+    dict
+        'names' of the variables, 'df_closed' and 'df_held' (n,) the central
+        differences of f [1 per normalised unit], 'switches' (n, 2) the closed-loop
+        valve switch counts at -step and +step, 'switches_at_x' and 'f_at_x'.
+    """
+    from suspension_tuning.vehicle.design import load_design_space
+    from suspension_tuning.vehicle.mixed import run_mixed
+    from suspension_tuning.vehicle.params import load_vehicle_params, with_integrator
+
+    x = np.asarray(x, dtype=float)
+    n = x.size
+    params = with_integrator(load_vehicle_params(), integrator)
+    base = run_mixed(x[None, :], params=params)
+    log = base.valve_log[0].astype(int)
+    lo, hi = np.maximum(x - step, 0.001), np.minimum(x + step, 1.0)
+    designs = np.tile(x, (2 * n, 1))
+    designs[np.arange(n), np.arange(n)] = lo
+    designs[n + np.arange(n), np.arange(n)] = hi
+
+    def held(k: int, _state: dict[str, Any]) -> tuple[int, int, int, int]:
+        return tuple(int(v) for v in log[:, k])
+
+    closed = run_mixed(designs, params=params)
+    replayed = run_mixed(designs, controllers=[held] * len(designs), params=params)
+    width = hi - lo
+    switches = closed.metrics['valve_switches']
+    return {'names': load_design_space().names(n),
+            'df_closed': (closed.f[n:] - closed.f[:n]) / width,
+            'df_held': (replayed.f[n:] - replayed.f[:n]) / width,
+            'switches': np.column_stack([switches[:n], switches[n:]]),
+            'switches_at_x': float(base.metrics['valve_switches'][0]),
+            'f_at_x': float(base.f[0])}
+
+
 def main(argv: list[str] | None = None) -> None:
     """``python -m suspension_tuning.studies.two_state DIR``: write the folder."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
@@ -100,9 +155,25 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument('--rough-length-m', type=float, default=MIXED_ROUGH_LENGTH_M,
                         help=f'paving length of the mixed runs, m (default '
                              f'{MIXED_ROUGH_LENGTH_M:g})')
+    parser.add_argument('--valve-jumps', action='store_true',
+                        help="then print, at the case's reference design "
+                             '(benchmarks/references.json), the central differences of f '
+                             'closed loop and with the valve history held (valve_jumps)')
     args = parser.parse_args(argv)
     path = write_config(args.out, args.rough_length_m)
     print(f'export SUSPENSION_TUNING_CONFIG_DIR={path}')
+    if args.valve_jumps:
+        os.environ['SUSPENSION_TUNING_CONFIG_DIR'] = str(path)
+        from suspension_tuning.studies.method_benchmark import reference_for
+
+        out = valve_jumps(reference_for('mixed', len(PRESET)).x)
+        print(f'f at the reference: {out["f_at_x"]:.6f}, valve switches '
+              f'{out["switches_at_x"]:.0f}')
+        print('| variable | df closed loop | df valves held | switches at -0.025 / +0.025 |')
+        print('|---|---|---|---|')
+        for name, closed, held, sw in zip(out['names'], out['df_closed'], out['df_held'],
+                                          out['switches']):
+            print(f'| {name} | {closed:+.3f} | {held:+.3f} | {sw[0]:.0f} / {sw[1]:.0f} |')
 
 
 if __name__ == '__main__':
