@@ -552,3 +552,25 @@ def test_the_bound_kkt_test_waits_while_a_constraint_is_active():
     result = dynamic_q(evaluate, gradient, [0.6, 0.7], [0.0, 0.0], [1.0, 1.0],
                        {'bound_kkt': True, 'xtol': 1e-5, 'converge_iterations': 2})
     assert result.stop_test != 'bound_kkt'
+
+
+def test_a_cycle_of_iterates_halves_the_move_limit_and_the_run_converges():
+    # min (x - 0.5)^2 on [0.001, 1] with a model's slope: the right sign, size 1
+    # everywhere (a function of x alone, as simplified gradients without the
+    # correction), and no curvature: each step goes to the move limit.  From 0.001
+    # with rho0 = 0.3 the iterates run 0.301, 0.901 (worse: rho 0.3), 0.601, 0.001
+    # (worse), and the next step would repeat 0.301 with rho 0.6 for ever (hand).
+    # Halving rho where an iterate returns turns the cycle into a bisection.
+    def f(x):
+        return float((x[0] - 0.5) ** 2), np.zeros(0), np.zeros(0)
+
+    def slope(x):
+        return np.array([1.0 if x[0] > 0.5 else -1.0]), np.zeros((0, 1)), np.zeros((0, 1))
+
+    result = dynamic_q(f, slope, [0.001], [0.001], [1.0],
+                       {'maxiter': 40, 'surrogate_objective_curvature': 'zero'})
+    xs = [float(r['x'][0]) for r in result.history]
+    np.testing.assert_allclose(xs[:6], [0.001, 0.301, 0.901, 0.601, 0.001, 0.301], atol=1e-8)
+    assert xs[6] == pytest.approx(0.451, abs=1e-8)  # rho halved to 0.15 at the return
+    assert result.status != 3  # not the iteration limit
+    assert abs(result.x_best[0] - 0.5) < 1e-3

@@ -25,7 +25,10 @@ iteration is worse (feasible iterates: f increased; otherwise: the largest
 violation did not decrease) the move limit is multiplied by
 ``rho_reduction`` (1/2) and, by default, the step is still accepted as in
 the book; option ``worse_step='reject'`` re-solves from the same iterate with
-the smaller move limit instead.
+the smaller move limit instead.  An iteration that returns to an earlier iterate
+(within ``xtol / 100``) also halves the move limit [E]: with gradients that are a function of x
+(the simplified models without the secant correction) the loop would otherwise
+repeat the same cycle of iterates to the iteration limit.
 
 Changed from the recalled rule (physics-reference 1.3 [R] only reduces the
 move limit): after a step that was not worse and reached the move limit,
@@ -590,6 +593,21 @@ class DynamicQ:
         kind, x = self._pending
         return kind, x.copy()
 
+    def _revisited(self, x: Array) -> bool:
+        """Whether ``x`` returns to an iterate of the history (not recorded yet).
+
+        Within ``xtol / 100`` in every variable: the subproblem's solution repeats an
+        earlier one only to the solver's accuracy (1e-10 here).
+
+        With gradients that depend on x alone, an iteration that returns to an earlier
+        iterate closes a cycle that would repeat to the iteration limit (the move limit
+        halved on the worse step of the cycle and doubled again on the next): the move
+        limit is halved instead of kept or grown.
+        """
+        tol = 0.01 * self.options.xtol
+        return any(float(np.max(np.abs(np.asarray(r['x'], float) - x))) <= tol
+                   for r in self.history)
+
     def tell(self, value: Any, source: str | None = None) -> dict[str, Any] | None:
         """Give the answer to the pending request.
 
@@ -984,7 +1002,7 @@ class DynamicQ:
             else:
                 worse = viol_new > viol_cur
             step = float(np.linalg.norm(x_new - cur.x))
-            if worse:
+            if worse or self._revisited(x_new):
                 self._rho = rho * opt.rho_reduction
             elif step >= 0.99 * rho:
                 rho_max = math.inf if opt.rho_max is None else opt.rho_max
