@@ -170,6 +170,13 @@ def ratio_text(ratio: float, ours: float, peers: dict) -> str:
     return f'{ratio:.2f}'
 
 
+def best_peer_text(p: dict) -> str:
+    """The best peer's name, or 'none' when no peer solves the median start."""
+    if math.isfinite(p['peer_best_full_runs']):
+        return p['best_peer']
+    return 'none (no peer solves the median start)'
+
+
 def print_case(scenario: str, out: dict, suffix: str) -> None:
     """The 8-variable lines of one case (``suffix``: '' or '_noisy')."""
     case = f'{scenario}{N_VARS}'
@@ -196,9 +203,7 @@ def print_case(scenario: str, out: dict, suffix: str) -> None:
         m = out['summaries'][peer]
         print(f'peer_median_full_runs_{peer}_{case}{suffix}: {runs(median)} '
               f'({m["starts_solved"]} of {len(out["starts"])} solved)')
-    print(f'peer_best_{case}{suffix}: '
-          + (p['best_peer'] if math.isfinite(p['peer_best_full_runs'])
-             else 'none (no peer solves the median start)'))
+    print(f'peer_best_{case}{suffix}: {best_peer_text(p)}')
     print(f'peer_best_full_runs_{case}{suffix}: {runs(p["peer_best_full_runs"])}')
     print(f'full_runs_ratio_vs_best_peer_{case}{suffix}: '
           f'{ratio_text(p["full_runs_ratio_vs_best_peer"], ours, p)}')
@@ -332,7 +337,7 @@ def main() -> None:
         ours = out['summaries']['dq_simplified']['median_full_runs']
         print(f'ratio_by_n: {scenario} n {n}, ours_median_full_runs {runs(ours)}, ours_solved '
               f'{out["summaries"]["dq_simplified"]["starts_solved"]}, best_peer '
-              f'{p["best_peer"]} {runs(p["peer_best_full_runs"])}, calibration_runs '
+              f'{best_peer_text(p)} {runs(p["peer_best_full_runs"])}, calibration_runs '
               f'{out["calibration_runs"]}, ratio '
               f'{ratio_text(p["full_runs_ratio_vs_best_peer"], ours, p)}, paid_ratio '
               f'{ratio_text(p["full_runs_ratio_vs_best_peer_with_calibration"], ours, p)}')
