@@ -703,10 +703,13 @@ def _finish(result: OptimizeResult, request: TuningRequest, terms: _ConstraintTe
             np.asarray(result.x_best, float).tobytes())
         if metrics is not None:
             result.update(metrics_best=dict(metrics))
-    off = CorrectionOptions.from_mapping(request.correction).off_for_scenarios
-    result.update(correction=correction.summary() if correction is not None
-                  else {'method': 'none'} if request.scenario not in off
-                  else {'method': 'none', 'off_for_scenario': request.scenario})
+    if correction is not None:
+        summary = correction.summary()
+    else:
+        summary = {'method': 'none'}
+        if request.scenario in request.correction['off_for_scenarios']:
+            summary['off_for_scenario'] = request.scenario
+    result.update(correction=summary)
     if check is not None:
         result.update(check=check)
     return result

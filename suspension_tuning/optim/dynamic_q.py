@@ -596,13 +596,12 @@ class DynamicQ:
     def _revisited(self, x: Array) -> bool:
         """Whether ``x`` returns to an iterate of the history (not recorded yet).
 
-        Within ``xtol / 100`` in every variable: the subproblem's solution repeats an
-        earlier one only to the solver's accuracy (1e-10 here).
-
         With gradients that depend on x alone, an iteration that returns to an earlier
         iterate closes a cycle that would repeat to the iteration limit (the move limit
         halved on the worse step of the cycle and doubled again on the next): the move
-        limit is halved instead of kept or grown.
+        limit is halved instead of kept or grown.  "Returns" means within ``xtol / 100``
+        in every variable: the subproblem's solution repeats an earlier one only to the
+        solver's accuracy (1e-10 here).
         """
         tol = 0.01 * self.options.xtol
         return any(float(np.max(np.abs(np.asarray(r['x'], float) - x))) <= tol
