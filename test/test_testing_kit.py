@@ -21,6 +21,7 @@ from suspension_tuning.testing import (
     reserved_domain,
     send_goal,
     spinning_executor,
+    tuning_graph,
     wait_for_bag,
     wait_for_future,
     wait_until,
@@ -281,3 +282,32 @@ def test_replacing_or_configuring_a_node_the_graph_does_not_have_is_an_error(ros
     with pytest.raises(ValueError, match=r"no node named \['recorder'\] in the graph to set "
                                          r"parameters on"):
         TuningGraph(ros_context, parameters={'recorder': {'post_run_s': 0.5}})
+
+
+def test_each_graph_node_spins_on_the_executor_it_asks_for_as_under_ros2_run(ros_context):
+    """The kit spins the step-locked valve controller single-threaded, as ``ros2 run``
+    does (nodes/_spin.py ``executor_for``), so a mixed run over topics answers every
+    step in time; the nodes that wait on other callbacks get their thread pools."""
+    from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+    from rclpy.node import Node
+    from suspension_tuning_interfaces.srv import EvaluateDesign
+
+    class OwnController(Node):  # a test's own node: no EXECUTOR attribute
+        def __init__(self, **kwargs):
+            super().__init__('valve_controller', **kwargs)
+
+    with tuning_graph(ros_context) as graph:
+        kinds = {s.nodes[0].get_name(): type(s.executor) for s in graph.spinners}
+        assert kinds['valve_controller'] is SingleThreadedExecutor
+        for name in ('full_vehicle_sim', 'gradient_evaluator', 'coordinator'):
+            assert kinds[name] is MultiThreadedExecutor, name
+        # One design of the closed-loop scenario, every control step answered over
+        # topics: about 2 s, where a multi-threaded valve controller timed out on 2 cores.
+        response = graph.call(EvaluateDesign, '/full_vehicle_sim/evaluate',
+                              EvaluateDesign.Request(scenario='mixed', n_vars=2,
+                                                     designs=[0.5005, 0.5005]),
+                              timeout_s=120.0)
+        assert response.success, response.error
+    with tuning_graph(ros_context, replace={'valve_controller': OwnController}) as graph:
+        kinds = {s.nodes[0].get_name(): type(s.executor) for s in graph.spinners}
+        assert kinds['valve_controller'] is SingleThreadedExecutor

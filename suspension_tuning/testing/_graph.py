@@ -15,6 +15,7 @@ from typing import Any
 
 from rclpy.action import ActionClient
 from rclpy.context import Context
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -126,7 +127,10 @@ class TuningGraph:
         node's own (``~/.cache/suspension_tuning/calibration``), shared with other
         runs.
     num_threads : int
-        Threads of each node's executor (1: a SingleThreadedExecutor).
+        Threads of the executor of each node that asks for a
+        ``MultiThreadedExecutor`` (its class attribute ``EXECUTOR``, as ``ros2 run``
+        spins it); the other nodes, a test's own without the attribute among them,
+        get a SingleThreadedExecutor as they do there.  1: single-threaded throughout.
     ready_timeout_s : float
         Longest wait for the recorder to subscribe to the run topics, s.
 
@@ -184,8 +188,19 @@ class TuningGraph:
             raise
 
     def add(self, node: Node, num_threads: int = 4) -> Node:
-        """Spin ``node`` on an executor of its own; it is destroyed with the graph."""
-        spinner = SpinningExecutor(self.context, num_threads, name=f'spin_{node.get_name()}')
+        """Spin ``node`` on an executor of its own; it is destroyed with the graph.
+
+        The executor is of the kind the node asks for (class attribute ``EXECUTOR``,
+        default single-threaded), with ``num_threads`` threads when multi-threaded.
+        A step-locked node (the valve controller) answers each message before the
+        next comes: on a multi-threaded executor every answer is handed to a pool
+        thread, and on 2 cores shared with the integrating thread the round trip
+        took 4-50 ms at the median and over 0.4 s for one in ten (against 0.4-0.7
+        ms single-threaded), so a mixed run over topics timed out.
+        """
+        kind = getattr(node, 'EXECUTOR', SingleThreadedExecutor)
+        threads = num_threads if issubclass(kind, MultiThreadedExecutor) else 1
+        spinner = SpinningExecutor(self.context, threads, name=f'spin_{node.get_name()}')
         spinner.add(node)
         self.spinners.append(spinner)
         return node
