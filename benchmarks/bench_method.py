@@ -66,7 +66,10 @@ Definitions (``suspension_tuning.studies.method_benchmark``):
   ``ride4_runs_stopped_by_test``: ours' runs ended by a test of their own (xtol, ftol,
   noise, bound_kkt, rho_min), not by the iteration limit; ``ride4_stop_tests`` names them.
   ``ride4_starts_solved_noisy_checked``: solved with g of the check at the tighter
-  tolerance (which stands in for the fixed-step model).
+  tolerance (which stands in for the fixed-step model).  ``..._noisy_judged_fixed_step``:
+  the paid figures on the noisy model with every method's answer judged by the
+  fixed-step model's g (its gap already is): a peer's answer is then solved only
+  when the converged physics finds it feasible, as ours is after the check.
 * **Rounds** (``method_benchmark.rounds``): sequential full-run rounds with a pool of
   P = 1, 4, 16 workers: the calibration's samples P at a time, every other paid run one
   round (Dynamic-Q, COBYLA and COBYQA are sequential; NOMAD and Optuna ran here one
@@ -239,6 +242,24 @@ def print_peers(out: dict[str, Any], noisy: bool) -> None:
     print(f'peer_best_paid_ride4{tag}: {p["best_paid_peer"]}')
     print(f'peer_best_paid_full_runs_ride4{tag}: {runs_to_solve(p["peer_best_paid_full_runs"])}')
     print(f'paid_ratio_vs_best_peer{tag}: {p["paid_ratio_vs_best_peer"]:.2f}')
+    if noisy:  # every method's answer judged on the fixed-step model's g too
+        for method, rs in out['results'].items():
+            name = 'ride4' if method == 'dq_simplified' else method
+            print(f'{name}_starts_solved_noisy_judged_fixed_step: '
+                  f'{sum(r.solved_fixed_step for r in rs)}')
+            print(f'{name}_final_violation_fixed_step_noisy: '
+                  f'{[round(r.max_violation_fixed_step, 4) for r in rs]}')
+        for peer, median in p['peer_paid_medians_fixed_step'].items():
+            print(f'peer_median_paid_full_runs_{peer}_noisy_judged_fixed_step: '
+                  f'{runs_to_solve(median)}')
+        print(f'ride4_paid_full_runs_noisy_judged_fixed_step: '
+              f'{runs_to_solve(p["ours_paid_full_runs_fixed_step"])}')
+        best = p['best_paid_peer_fixed_step']
+        if math.isinf(p['peer_paid_medians_fixed_step'][best]):
+            best = 'none (no peer solves the median start)'
+        print(f'peer_best_paid_ride4_noisy_judged_fixed_step: {best}')
+        print(f'paid_ratio_vs_best_peer_noisy_judged_fixed_step: '
+              f'{p["paid_ratio_vs_best_peer_fixed_step"]:.2f}')
     results = out['results']
     for who, method in (('ours', 'dq_simplified'), ('best_peer', p['best_paid_peer'])):
         cal = out['calibration_runs'] if method == 'dq_simplified' else 0

@@ -212,6 +212,18 @@ def test_paid_full_runs_count_calibration_and_every_run_to_the_own_stop_of_a_sol
     assert mb.paid_full_runs(_result(True, 40, budget=300), own_stop=False) == 300
 
 
+def test_an_answer_the_fixed_step_model_finds_infeasible_is_not_paid_for_when_so_judged():
+    # Feasible on the noisy model (g 0), 0.012 on the fixed-step one: the noisy model's
+    # tyre-hop bias near the 4-variable ride optimum (docs/noise_study.md, 0.008-0.019).
+    r = _result(True, 20)
+    r.max_violation_fixed_step = 0.012
+    assert mb.paid_full_runs(r) == 20
+    assert not r.solved_fixed_step  # above SOLVED_VIOLATION, 0.005
+    assert mb.paid_full_runs(r, fixed_step=True) == math.inf
+    r.max_violation_fixed_step = 0.004
+    assert mb.paid_full_runs(r, fixed_step=True) == 20
+
+
 def test_rounds_share_only_the_calibration_among_the_workers():
     r = _result(True, 12, calibration_runs=16)
     r.paid_full_runs = mb.paid_full_runs(r)  # 28

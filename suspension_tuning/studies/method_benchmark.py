@@ -478,14 +478,26 @@ class StartResult:
         return self.solved and self.check_max_violation <= SOLVED_VIOLATION
 
 
-def paid_full_runs(r: StartResult, own_stop: bool = True) -> float:
+    @property
+    def solved_fixed_step(self) -> bool:
+        """Solved, judged on the fixed-step model's largest g in place of the run's own.
+
+        The fixed-step model is the converged physics, on which the gap is judged too.
+        """
+        return (self.feasible and self.gap_pct <= SOLVED_GAP_PCT
+                and self.max_violation_fixed_step <= SOLVED_VIOLATION)
+
+
+def paid_full_runs(r: StartResult, own_stop: bool = True, fixed_step: bool = False
+                   ) -> float:
     """What a user pays for a start: every full run until the method stops by itself.
 
     Calibration and the tighter-tolerance check included; ``inf`` when the final
-    answer is not solved (not reached).  A method without a stop of its own
-    (``own_stop`` False) pays its budget.
+    answer is not solved (not reached; with ``fixed_step``, not solved when its g is
+    judged on the fixed-step model, :attr:`StartResult.solved_fixed_step`).  A method
+    without a stop of its own (``own_stop`` False) pays its budget.
     """
-    if not r.solved:
+    if not (r.solved_fixed_step if fixed_step else r.solved):
         return math.inf
     runs = r.full_runs if own_stop else r.budget  # the check's runs are in full_runs
     return float(r.calibration_runs + runs)
@@ -719,7 +731,10 @@ def peer_figures(results: Mapping[str, Sequence[StartResult]], ours: float,
         ``peer_medians`` (peer -> :func:`peer_median`), ``best_peer``,
         ``peer_best_full_runs`` (the smallest median, ``inf`` if no peer's is reached),
         ``full_runs_ratio_vs_best_peer`` and ``..._with_calibration`` (ours plus
-        ``calibration_runs``), as :func:`run_ratio`.
+        ``calibration_runs``), as :func:`run_ratio`; the paid figures, and the same
+        with every method's answer judged on the fixed-step model
+        (``..._fixed_step``, :func:`paid_full_runs` ``fixed_step``: on the noisy
+        model a peer's answer is otherwise judged by the noisy g its run saw).
     """
     medians = {m: peer_median(rs, budget) for m, rs in results.items()
                if m in PEERS or m in SLSQP_VARIANTS}
@@ -731,7 +746,18 @@ def peer_figures(results: Mapping[str, Sequence[StartResult]], ours: float,
     best_paid = min(paid, key=lambda m: paid[m])
     ours_paid = float(np.median([r.paid_full_runs for r in results['dq_simplified']])) \
         if 'dq_simplified' in results else math.inf
+
+    def paid_fixed(method: str) -> float:
+        return float(np.median([paid_full_runs(r, method not in NO_OWN_STOP, True)
+                                for r in results[method]]))
+
+    fixed = {m: paid_fixed(m) for m in medians}
+    best_fixed = min(fixed, key=lambda m: fixed[m])
+    ours_fixed = paid_fixed('dq_simplified') if 'dq_simplified' in results else math.inf
     return {'peer_medians': medians, 'best_peer': best, 'peer_best_full_runs': value,
+            'peer_paid_medians_fixed_step': fixed, 'best_paid_peer_fixed_step': best_fixed,
+            'ours_paid_full_runs_fixed_step': ours_fixed,
+            'paid_ratio_vs_best_peer_fixed_step': run_ratio(fixed[best_fixed], ours_fixed),
             'peer_paid_medians': paid, 'best_paid_peer': best_paid,
             'peer_best_paid_full_runs': paid[best_paid], 'ours_paid_full_runs': ours_paid,
             'paid_ratio_vs_best_peer': run_ratio(paid[best_paid], ours_paid),
