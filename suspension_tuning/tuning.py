@@ -478,7 +478,10 @@ def optimise(request: TuningRequest, full_model: FullModel,
         ``best_iteration``, ``best_feasible`` and ``constraint_values_best``; see
         :func:`~suspension_tuning.optim.dynamic_q.dynamic_q`).  ``stop_test`` names
         the test that ended the run ('xtol', 'ftol', 'noise', 'bound_kkt', 'rho_min', 'maxiter',
-        'cancelled'); with ``check_model``, ``check`` holds the check's verdicts
+        'cancelled'); ``restarts``: how often a corrected run that reached the
+        iteration limit started again from its answer (CorrectionOptions
+        ``restarts``; the history holds every run's records, numbered on, and the
+        message says so); with ``check_model``, ``check`` holds the check's verdicts
         (:func:`check_summary`).  Every history record
         whose full run returned named metrics holds them (``metrics``: name -> value,
         the objective scenario's), and ``metrics_best`` those of the reported design.
@@ -513,6 +516,22 @@ def optimise(request: TuningRequest, full_model: FullModel,
     cancelled = _drive(opt, request, terms, evaluated, correct, correction_options,
                        corrections, callback, counter, lower, upper, 0)
     result = opt.result()
+    restarts = 0
+    while (corrections[0] is not None and not cancelled
+           and restarts < correction_options.restarts
+           and result.get('stop_test') == 'maxiter' and 'x_best' in result):
+        # A run whose correction learnt from its full runs (the simplified models gave
+        # values) starts again: the correction afresh at the answer (a blind variable's
+        # column seeded there again), Dynamic-Q with its first move limit.
+        corrections[0] = None
+        result, cancelled = _run_from_answer(result, request, terms, evaluated, correct,
+                                             correction_options, corrections, callback,
+                                             counter, lower, upper, options, staircase)
+        restarts += 1
+    result['restarts'] = restarts
+    if restarts:
+        result['message'] = (f'{result.message} (the run restarted {restarts} time(s) from '
+                             'its answer at the iteration limit)')
     check: dict[str, Any] | None = None
     if check_model is not None and not cancelled and 'x_best' in result:
         result, check = _check_and_continue(
@@ -587,6 +606,37 @@ def _drive(opt: DynamicQ, request: TuningRequest, terms: _ConstraintTerms,
     return cancelled
 
 
+def _run_from_answer(result: OptimizeResult, request: TuningRequest,
+                     terms: _ConstraintTerms, evaluated: dict[bytes, Array], correct: bool,
+                     correction_options: CorrectionOptions,
+                     corrections: list[SecantCorrection | None],
+                     callback: Callable[[dict[str, Any], RunCounter], bool | None] | None,
+                     counter: RunCounter, lower: Array, upper: Array,
+                     options: Mapping[str, Any], staircase: Callable[[int], list[bool]]
+                     ) -> tuple[OptimizeResult, bool]:
+    """A new Dynamic-Q run from ``result``'s answer, numbered on after its history.
+
+    The answer's values come from the cache (no full run); the new run's result
+    carries both histories and iteration counts.  Returns (result, cancelled).
+    """
+    first = len(result.history)
+    opt = DynamicQ(np.asarray(result.x_best, float), lower, upper, options,
+                   gradient_source=request.gradient_source,
+                   surrogate_rule_constraints=staircase)
+    cancelled = _drive(opt, request, terms, evaluated, correct, correction_options,
+                       corrections, callback, counter, lower, upper, first)
+    second = opt.result()
+    for rec in second.history:
+        if int(rec['iteration']) < first:
+            rec['iteration'] = int(rec['iteration']) + first
+    second.update(history=list(result.history) + list(second.history),
+                  nit=int(result.nit) + int(second.nit),
+                  iterations=int(result.nit) + int(second.nit))
+    if 'best_iteration' in second:
+        second.update(best_iteration=int(second.best_iteration) + first)
+    return second, cancelled
+
+
 def check_summary(g_run: ArrayLike, g_check: ArrayLike, f_check: float, gtol: float
                   ) -> dict[str, Any]:
     """The check's verdicts on one design (see :func:`optimise`'s ``check_model``).
@@ -643,20 +693,10 @@ def _check_and_continue(result: OptimizeResult, request: TuningRequest,
             if full is not None:
                 evaluated[key] = np.r_[full[0], full[1] + shift]
         first = len(result.history)
-        opt = DynamicQ(x_best, lower, upper, options, gradient_source=request.gradient_source,
-                       surrogate_rule_constraints=staircase)
-        cancelled = _drive(opt, request, terms, evaluated, correct, correction_options,
-                           corrections, callback, counter, lower, upper, first)
-        second = opt.result()
+        second, cancelled = _run_from_answer(result, request, terms, evaluated, correct,
+                                             correction_options, corrections, callback,
+                                             counter, lower, upper, options, staircase)
         terms.shift = None
-        for rec in second.history:
-            if int(rec['iteration']) < first:
-                rec['iteration'] = int(rec['iteration']) + first
-        second.update(history=list(result.history) + list(second.history),
-                      nit=int(result.nit) + int(second.nit),
-                      iterations=int(result.nit) + int(second.nit))
-        if 'best_iteration' in second:
-            second.update(best_iteration=int(second.best_iteration) + first)
         # the answer's values as the model gave them (the shift was the run's)
         for name in ('g', 'g_best'):
             if name in second:

@@ -258,3 +258,42 @@ def test_seeding_a_column_subtracts_the_simplified_slope():
     corr.seed_column(1, [0.5, 0.5], -0.1, [1.0, 2.0], [1.2, 2.0], [0.0, 0.0], [0.5, -3.0])
     # (1.2 - 1.0) / -0.1 - 0.5 = -2.5; (2.0 - 2.0) / -0.1 + 3.0 = 3.0
     np.testing.assert_allclose(corr.jacobian[:, 1], [-2.5, 3.0])
+
+
+def test_a_run_that_ends_at_the_iteration_limit_restarts_once_from_its_answer():
+    # The blind problem above with 3 iterations: the run ends at the limit with x1 at
+    # 0.85, its column learnt at the start.  Started again from that answer, the
+    # correction seeds x1's column there (one full run) and Dynamic-Q takes its first
+    # move limit: x1 goes to 0.55 and f from 0.0234 to 0.0217, below the first answer's
+    # (the answer of the restart is never worse: it starts there).
+    target = np.array([0.3, 0.7])
+
+    def full(points):
+        points = np.atleast_2d(points)
+        return FullEvaluation(f=np.sum((points - target) ** 2, axis=1),
+                              g=-np.ones((len(points), 1)))
+
+    def blind(x, inputs):
+        values = np.r_[(x[0] - 0.3) ** 2, -1.0]
+        return np.array([2.0 * (x[0] - 0.3), 0.0]), np.zeros((1, 2)), values
+
+    options = dict(OPTIONS, maxiter=3)
+    runs = {}
+    for restarts in (0, 1):
+        request = TuningRequest('ride', 2, x0=[0.9, 0.2], gradient_source='simplified',
+                                options=options, correction={'restarts': restarts})
+        runs[restarts] = optimise(request, full, blind)
+    once, never = runs[1], runs[0]
+    assert never.restarts == 0 and once.restarts == 1
+    assert never.stop_test == once.stop_test == 'maxiter'
+    assert once.f_best < never.f_best
+    assert abs(once.x_best[1] - 0.7) < abs(never.x_best[1] - 0.7)
+    # one history, numbered on; the first run's records come first
+    assert [r['iteration'] for r in once.history] == list(range(len(once.history)))
+    assert len(once.history) == 2 * len(never.history)
+    np.testing.assert_allclose(once.history[len(never.history)]['x'], never.x_best)
+    # the restart pays what the first run did (4 evaluations and 1 seed run) but the
+    # answer it starts from, whose values are known
+    assert once.n_full_runs == 2 * never.n_full_runs - 1
+    with pytest.raises(ValueError, match='restarts'):
+        CorrectionOptions(restarts=-1)

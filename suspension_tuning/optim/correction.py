@@ -125,6 +125,11 @@ class CorrectionOptions:
     off_for_scenarios : tuple of str
         Scenarios optimised without the correction, whatever ``method`` says: those
         whose full-model objective jumps with the design (module notes; 'mixed').
+    restarts : int
+        A corrected run that ends at the iteration limit starts again from its answer
+        this many times at most, the correction started afresh there (a blind
+        variable's column seeded again) and Dynamic-Q with its first move limit
+        [E: 1, config/optimiser.yaml].
     """
 
     method: str = 'secant'
@@ -133,9 +138,10 @@ class CorrectionOptions:
     seed_step: float = 0.1
     verify_bounds: bool = True
     off_for_scenarios: tuple[str, ...] = ('mixed',)
+    restarts: int = 1
 
     def __post_init__(self) -> None:
-        """Check the method and the step."""
+        """Check the method, the steps and the restarts."""
         if self.method not in CORRECTION_METHODS:
             raise ValueError(f'correction method must be one of '
                              f'{", ".join(CORRECTION_METHODS)}, got {self.method!r}')
@@ -147,6 +153,10 @@ class CorrectionOptions:
                 and 0 < self.seed_step <= 0.5):
             raise ValueError(f'correction seed_step must be in (0, 0.5], got '
                              f'{self.seed_step!r}')
+        if isinstance(self.restarts, bool) or not isinstance(self.restarts, int) \
+                or self.restarts < 0:
+            raise ValueError(f'correction restarts must be an integer >= 0, got '
+                             f'{self.restarts!r}')
         names = self.off_for_scenarios
         if isinstance(names, str) or not all(isinstance(n, str) for n in names):
             raise ValueError(f'correction off_for_scenarios must be a list of scenario '
