@@ -166,6 +166,29 @@ def test_an_extra_constraint_with_a_simplified_model_is_corrected_too():
     np.testing.assert_allclose(jac[5], [0.5, 0.5], atol=0.05)
 
 
+BLIND_TARGET = np.array([0.3, 0.7])
+
+
+def blind_full(points):
+    """The full model: f = (x0 - 0.3)^2 + (x1 - 0.7)^2, one inactive constraint."""
+    points = np.atleast_2d(points)
+    return FullEvaluation(f=np.sum((points - BLIND_TARGET) ** 2, axis=1),
+                          g=-np.ones((len(points), 1)))
+
+
+def blind_simplified(x, inputs):
+    """A simplified model that sees x0 only: its x1 column is exactly zero."""
+    values = np.r_[(x[0] - 0.3) ** 2, -1.0]
+    return np.array([2.0 * (x[0] - 0.3), 0.0]), np.zeros((1, 2)), values
+
+
+def _run_blind(options, correction):
+    """tuning.optimise on the blind problem from (0.9, 0.2)."""
+    request = TuningRequest('ride', 2, x0=[0.9, 0.2], gradient_source='simplified',
+                            options=options, correction=correction)
+    return optimise(request, blind_full, blind_simplified)
+
+
 def test_a_variable_the_simplified_model_cannot_see_is_seeded_and_then_moves():
     # the full model: f = (x0 - 0.3)^2 + (x1 - 0.7)^2; the simplified model sees x0 only
     # (a bar in the pitch-plane model: its column is exactly zero).  Without the seed
@@ -173,23 +196,7 @@ def test_a_variable_the_simplified_model_cannot_see_is_seeded_and_then_moves():
     # one full run more.  It does not settle on 0.7: Broyden's update shares each mixed
     # step's change between the columns, and the run ends at the bound x1 = 1 with a
     # stale slope; the best design seen has x1 = 0.85 (docs/design_space.md)
-    target = np.array([0.3, 0.7])
-
-    def full(points):
-        points = np.atleast_2d(points)
-        return FullEvaluation(f=np.sum((points - target) ** 2, axis=1),
-                              g=-np.ones((len(points), 1)))
-
-    def blind(x, inputs):
-        values = np.r_[(x[0] - 0.3) ** 2, -1.0]
-        return np.array([2.0 * (x[0] - 0.3), 0.0]), np.zeros((1, 2)), values
-
-    runs = {}
-    for seed in (True, False):
-        request = TuningRequest('ride', 2, x0=[0.9, 0.2], gradient_source='simplified',
-                                options=OPTIONS, correction={'seed_blind': seed})
-        result = optimise(request, full, blind)
-        runs[seed] = result
+    runs = {seed: _run_blind(OPTIONS, {'seed_blind': seed}) for seed in (True, False)}
     assert runs[True].correction['seeded_columns'] == [1]
     assert abs(runs[True].x_best[1] - 0.7) < 0.5 * abs(0.2 - 0.7)  # halfway there at least
     assert runs[True].f_best < 0.05 < runs[False].f_best  # 0.023 against 0.25 ((0.2-0.7)^2)
@@ -266,24 +273,9 @@ def test_a_run_that_ends_at_the_iteration_limit_restarts_once_from_its_answer():
     # correction seeds x1's column there (one full run) and Dynamic-Q takes its first
     # move limit: x1 goes to 0.55 and f from 0.0234 to 0.0217, below the first answer's
     # (the answer of the restart is never worse: it starts there).
-    target = np.array([0.3, 0.7])
-
-    def full(points):
-        points = np.atleast_2d(points)
-        return FullEvaluation(f=np.sum((points - target) ** 2, axis=1),
-                              g=-np.ones((len(points), 1)))
-
-    def blind(x, inputs):
-        values = np.r_[(x[0] - 0.3) ** 2, -1.0]
-        return np.array([2.0 * (x[0] - 0.3), 0.0]), np.zeros((1, 2)), values
-
     options = dict(OPTIONS, maxiter=3)
-    runs = {}
-    for restarts in (0, 1):
-        request = TuningRequest('ride', 2, x0=[0.9, 0.2], gradient_source='simplified',
-                                options=options, correction={'restarts': restarts})
-        runs[restarts] = optimise(request, full, blind)
-    once, never = runs[1], runs[0]
+    never = _run_blind(options, {'restarts': 0})
+    once = _run_blind(options, {'restarts': 1})
     assert never.restarts == 0 and once.restarts == 1
     assert never.stop_test == once.stop_test == 'maxiter'
     assert once.f_best < never.f_best
