@@ -127,11 +127,12 @@ def test_a_runs_calibration_samples_default_per_case_and_refuse_one():
     )
 
     # config/simplified_models.yaml scaling.run_samples: none on the ride, 4 on handling
-    # (measured paid full runs, docs/corrected_gradients.md); an unlisted size (8
+    # (measured paid full runs, docs/corrected_gradients.md); an unlisted size (mixed, 8
     # variables) takes scaling.n_samples
     assert run_calibration_samples('ride', 4) == run_calibration_samples('ride', 2, -1) == 0
+    assert run_calibration_samples('ride', 8) == 0
     assert run_calibration_samples('handling', 4, None) == 4
-    assert run_calibration_samples('ride', 8) == calibration_settings()[0]
+    assert run_calibration_samples('mixed', 8) == calibration_settings()[0]
     assert run_calibration_samples('ride', 4, 0) == 0  # given: none
     assert run_calibration_samples('handling', 4, 16) == 16
     with pytest.raises(ValueError, match='at least 2 samples'):

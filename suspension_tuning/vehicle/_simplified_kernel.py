@@ -426,3 +426,177 @@ def _h_integrate_design(bi, states, sstates, P, dk, dv, ds, pc, slip, delta, dt,
                     out[bi, k, c] = o[c]
         for i in range(N_H_STATE):
             s[i] += dt / 6.0 * (kk[0, i] + 2.0 * kk[1, i] + 2.0 * kk[2, i] + kk[3, i])
+
+
+# ---- roll-and-pitch ride model (after the strut block) -------------------------------
+(
+    RP_G,
+    RP_A,
+    RP_B,
+    RP_MB,
+    RP_IY,
+    RP_IX,
+    RP_MAF,
+    RP_MAR,
+    RP_IAF,
+    RP_IAR,
+    RP_KT,
+    RP_CT,
+    RP_DSTF,
+    RP_DSTR,
+    RP_T2,
+    RP_TS2,
+    RP_XD,
+    RP_YD,
+    RP_XP,
+    RP_YP,
+) = range(N_SP, N_SP + 20)
+N_RP = N_SP + 20
+# roll-and-pitch state: z_s, theta, phi, z_af, phi_af, z_ar, phi_ar, then their rates
+N_RP_DOF = 7
+N_RP_STATE = 2 * N_RP_DOF
+# outputs per step: seat accelerations, 4 tyre forces (FL, FR, RL, RR), heave, pitch,
+# roll, 4 strut forces
+RO_ACC_D, RO_ACC_P, RO_FZ0, RO_ZS, RO_TH, RO_PHI, RO_FS0 = 0, 1, 2, 6, 7, 8, 9
+N_RP_OUT = 13
+
+
+@njit(cache=True, inline='always', error_model='numpy')
+def rp_deriv(q, v, ss, P, dk, dv, ds, zc, zcd, acc, fz, fs):
+    """Accelerations of the roll-and-pitch ride model (z up, pitch nose down, roll left up).
+
+    ``q``, ``v``: positions and rates (N_RP_DOF,); ``zc``, ``zcd``: road and its rate under
+    the corners FL, FR, RL, RR.  Writes ``acc`` (N_RP_DOF,), the tyre forces ``fz`` (4,)
+    and the strut forces ``fs`` (4,).  The same vertical equations as the full model's
+    kernel with one rigid body (no torsion) rolling about its own axis and no lateral
+    motion.
+    """
+    a = P[RP_A]
+    b = P[RP_B]
+    t2 = P[RP_T2]
+    ts2 = P[RP_TS2]
+    g = P[RP_G]
+    heave = 0.0
+    pitch = 0.0
+    roll = 0.0
+    # per axle: tyre force sum, strut force sum, tyre and strut roll moments
+    fz_f = fz_r = fs_f = fs_r = mt_f = mt_r = ms_f = ms_r = 0.0
+    for i in range(4):
+        axle = i // 2
+        sy = 1.0 if i % 2 == 0 else -1.0
+        xa = a if axle == 0 else -b
+        za = q[3 + 2 * axle]
+        pa = q[4 + 2 * axle]
+        zad = v[3 + 2 * axle]
+        pad = v[4 + 2 * axle]
+        dst = P[RP_DSTF] if axle == 0 else P[RP_DSTR]
+        yw = sy * t2
+        ft = _tyre(dst + zc[i] - (za + yw * pa), zcd[i] - (zad + yw * pad), P[RP_KT], P[RP_CT])
+        ysw = sy * ts2
+        zb = q[0] - xa * q[1] + ysw * q[2]
+        zbd = v[0] - xa * v[1] + ysw * v[2]
+        f = _strut((za + ysw * pa) - zb, (zad + ysw * pad) - zbd, ss[axle], P, dk, dv, ds)
+        fz[i] = ft
+        fs[i] = f
+        heave += f
+        pitch -= xa * f
+        roll += ysw * f
+        if axle == 0:
+            fz_f += ft
+            fs_f += f
+            mt_f += yw * ft
+            ms_f += ysw * f
+        else:
+            fz_r += ft
+            fs_r += f
+            mt_r += yw * ft
+            ms_r += ysw * f
+    bar_f = ss[0, SS_KARB] * (q[2] - q[4])
+    bar_r = ss[1, SS_KARB] * (q[2] - q[6])
+    acc[0] = heave / P[RP_MB] - g
+    acc[1] = pitch / P[RP_IY]
+    acc[2] = (roll - bar_f - bar_r) / P[RP_IX]
+    acc[3] = (fz_f - fs_f) / P[RP_MAF] - g
+    acc[4] = (mt_f - ms_f + bar_f) / P[RP_IAF]
+    acc[5] = (fz_r - fs_r) / P[RP_MAR] - g
+    acc[6] = (mt_r - ms_r + bar_r) / P[RP_IAR]
+
+
+@njit(cache=True, error_model='numpy', parallel=True)
+def rp_integrate(states, sstates, P, dk, dv, ds, zc, zcd, dt, n_steps, out):
+    """RK4 of the roll-and-pitch model over ``n_steps`` for every design (in place).
+
+    ``zc, zcd`` (4, 2 n_steps + 1): road and its rate under each corner at half steps.
+    Outputs ``out[b, k, :]`` are taken at the start of step k (first RK stage).
+    """
+    for bi in prange(states.shape[0]):
+        _rp_integrate_design(np.int64(bi), states, sstates, P, dk, dv, ds, zc, zcd, dt,
+                             n_steps, out)
+
+
+@njit(cache=True, error_model='numpy')
+def _rp_integrate_design(bi, states, sstates, P, dk, dv, ds, zc, zcd, dt, n_steps, out):
+    """RK4 of design ``bi`` for :func:`rp_integrate`."""
+    n = N_RP_DOF
+    ss = sstates[bi]
+    q = states[bi, :n].copy()
+    v = states[bi, n:].copy()
+    qs = np.empty(n)
+    vs = np.empty(n)
+    k1 = np.empty(n)
+    k2 = np.empty(n)
+    k3 = np.empty(n)
+    k4 = np.empty(n)
+    l2 = np.empty(n)
+    l3 = np.empty(n)
+    l4 = np.empty(n)
+    fz = np.empty(4)
+    fs = np.empty(4)
+    fz2 = np.empty(4)
+    fs2 = np.empty(4)
+    z0 = np.empty(4)
+    z0d = np.empty(4)
+    z1 = np.empty(4)
+    z1d = np.empty(4)
+    h2 = 0.5 * dt
+    for k in range(n_steps):
+        j = 2 * k
+        for c in range(4):
+            z0[c] = zc[c, j]
+            z0d[c] = zcd[c, j]
+            z1[c] = zc[c, j + 1]
+            z1d[c] = zcd[c, j + 1]
+        rp_deriv(q, v, ss, P, dk, dv, ds, z0, z0d, k1, fz, fs)
+        out[bi, k, RO_ACC_D] = k1[0] - P[RP_XD] * k1[1] + P[RP_YD] * k1[2]
+        out[bi, k, RO_ACC_P] = k1[0] - P[RP_XP] * k1[1] + P[RP_YP] * k1[2]
+        for c in range(4):
+            out[bi, k, RO_FZ0 + c] = fz[c]
+            out[bi, k, RO_FS0 + c] = fs[c]
+        out[bi, k, RO_ZS] = q[0]
+        out[bi, k, RO_TH] = q[1]
+        out[bi, k, RO_PHI] = q[2]
+        # stage 2: rates v + h/2 k1 (l2), positions q + h/2 v
+        for m in range(n):
+            qs[m] = q[m] + h2 * v[m]
+            l2[m] = v[m] + h2 * k1[m]
+        rp_deriv(qs, l2, ss, P, dk, dv, ds, z1, z1d, k2, fz2, fs2)
+        # stage 3
+        for m in range(n):
+            qs[m] = q[m] + h2 * l2[m]
+            l3[m] = v[m] + h2 * k2[m]
+        rp_deriv(qs, l3, ss, P, dk, dv, ds, z1, z1d, k3, fz2, fs2)
+        # stage 4
+        for m in range(n):
+            qs[m] = q[m] + dt * l3[m]
+            l4[m] = v[m] + dt * k3[m]
+        for c in range(4):
+            z0[c] = zc[c, j + 2]
+            z0d[c] = zcd[c, j + 2]
+        rp_deriv(qs, l4, ss, P, dk, dv, ds, z0, z0d, k4, fz2, fs2)
+        for m in range(n):
+            q[m] += dt / 6.0 * (v[m] + 2.0 * l2[m] + 2.0 * l3[m] + l4[m])
+            vs[m] = v[m] + dt / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
+        for m in range(n):
+            v[m] = vs[m]
+    states[bi, :n] = q
+    states[bi, n:] = v

@@ -57,9 +57,21 @@ SIMPLIFIED_CONFIG_PATH = CONFIG_DIR / 'simplified_models.yaml'
 KMH = 1.0 / 3.6  # [m/s per km/h]
 
 
+#: Values of config/simplified_models.yaml ``ride_model``.
+RIDE_MODELS = ('auto', 'pitch_plane', 'roll_pitch')
+
+
 def load_simplified_config(path: str | Path | None = None) -> dict[str, Any]:
-    """Load config/simplified_models.yaml as a plain mapping (units in the key names)."""
-    return read_yaml(Path(path) if path is not None else SIMPLIFIED_CONFIG_PATH)
+    """Load config/simplified_models.yaml as a plain mapping (units in the key names).
+
+    Raises ValueError naming the key when ``ride_model`` is not one of RIDE_MODELS.
+    """
+    config = read_yaml(Path(path) if path is not None else SIMPLIFIED_CONFIG_PATH)
+    kind = config.setdefault('ride_model', 'pitch_plane')
+    if kind not in RIDE_MODELS:
+        raise ValueError(f'simplified_models.yaml ride_model: unknown model {kind!r}; valid: '
+                         + ', '.join(RIDE_MODELS))
+    return config
 
 
 @functools.lru_cache(maxsize=4)

@@ -25,10 +25,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .design import AXLES, AxleSettings, DesignSpace, to_physical, validate_design
+from .design import (
+    AXLES,
+    AxleSettings,
+    DesignSpace,
+    load_design_space,
+    to_physical,
+    validate_design,
+)
 from .handling_model import HandlingInputs, HandlingModel
 from .metrics import TYRE_HOP_MAX_FRACTION
-from .pitch_plane import PitchPlaneModel
+from .pitch_plane import PitchPlaneModel, load_simplified_config
+from .roll_pitch import RollPitchModel
 
 SIMPLIFIED_SCENARIOS = ('ride', 'handling', 'mixed')
 #: Scenarios whose simplified model needs inputs captured from the full model's run.
@@ -102,18 +110,40 @@ class SimplifiedInputs:
         return cls(name, x, inputs)
 
 
+#: Design-variable targets that act in roll only: the pitch-plane model cannot see them.
+ROLL_TARGETS = ('anti_roll_bar',)
+
+
+def ride_model_kind(n_vars: int, space: DesignSpace | None = None) -> str:
+    """The ride scenario's simplified model for a design: 'pitch_plane' or 'roll_pitch'.
+
+    config/simplified_models.yaml ``ride_model``; 'auto' picks the roll-and-pitch model
+    when a design variable acts in roll only (:data:`ROLL_TARGETS`), else the paper's
+    pitch-plane model.
+    """
+    kind = load_simplified_config()['ride_model']
+    if kind != 'auto':
+        return kind
+    space = space if space is not None else load_design_space()
+    targets = {v.target for v in space.design_variables(n_vars)}
+    return 'roll_pitch' if targets & set(ROLL_TARGETS) else 'pitch_plane'
+
+
 @functools.lru_cache(maxsize=16)
-def pitch_plane_model(road: str = '', condition: str = '') -> PitchPlaneModel:
-    """The pitch-plane model (config files), built once per process, road and condition.
+def ride_model(road: str = '', condition: str = '',
+                      kind: str = 'pitch_plane') -> PitchPlaneModel | RollPitchModel:
+    """The ride model (config files), built once per process, road, condition and kind.
 
     ``road``: the ride road in place of config/scenarios.yaml's (a road name, a road
     file or an entry as YAML, :func:`~suspension_tuning.vehicle.road.resolve_road`).
     ``condition``: an operating condition as text
     (:meth:`suspension_tuning.conditions.Condition.as_text`): its speed, payload and road
-    (the eq. 15-24 model's inputs follow them); '' = none.
+    (the eq. 15-24 model's inputs follow them); '' = none.  ``kind``: 'pitch_plane'
+    (eqs. 15-24) or 'roll_pitch' (:class:`~.roll_pitch.RollPitchModel`).
     """
+    model = RollPitchModel if kind == 'roll_pitch' else PitchPlaneModel
     if not road and not condition:
-        return PitchPlaneModel()
+        return model()
     from .params import load_scenarios_config, load_vehicle_params
     from .pitch_plane import RideSetup
 
@@ -131,14 +161,14 @@ def pitch_plane_model(road: str = '', condition: str = '') -> PitchPlaneModel:
         parsed = Condition.from_text(condition)
         params = condition_params(parsed, params)
         scenarios = condition_scenarios(parsed, scenarios)
-    return PitchPlaneModel(params, RideSetup.from_scenario_config(params, scenarios))
+    return model(params, RideSetup.from_scenario_config(params, scenarios))
 
 
 @functools.lru_cache(maxsize=16)
 def handling_model(condition: str = '') -> HandlingModel:
     """The handling model (config files), built once per process and condition.
 
-    ``condition``: an operating condition as text (:func:`pitch_plane_model`): its
+    ``condition``: an operating condition as text (:func:`ride_model`): its
     payload (mass, centre of gravity, inertias); its manoeuvre speed reaches the model
     through the full run's inputs.  '' = none.
     """
@@ -168,11 +198,11 @@ def run_simplified(
     inputs : SimplifiedInputs, optional
         Required for 'handling' and 'mixed' (captured from the full model's run).
     road : str
-        Ride road in place of the configured one (:func:`pitch_plane_model`).
+        Ride road in place of the configured one (:func:`ride_model`).
     space : DesignSpace, optional
         The design space (default config/design_space.yaml).
     condition : str
-        An operating condition as text (:func:`pitch_plane_model`,
+        An operating condition as text (:func:`ride_model`,
         :func:`handling_model`).
 
     Returns
@@ -185,7 +215,8 @@ def run_simplified(
             f'unknown scenario {scenario!r}; valid: {", ".join(SIMPLIFIED_SCENARIOS)}'
         )
     if scenario == 'ride':
-        return pitch_plane_model(road, condition).evaluate(x, n_vars, space)
+        kind = ride_model_kind(n_vars, space)
+        return ride_model(road, condition, kind).evaluate(x, n_vars, space)
     if inputs is None or inputs.handling is None:
         raise ValueError(f'the {scenario} simplified model needs SimplifiedInputs from a full '
                          f'{scenario} run')
@@ -267,11 +298,11 @@ def run_mixed_simplified(x: np.ndarray, n_vars: int, inputs: HandlingInputs, roa
         'roll_rate_rms_deg_s').
     """
     xb = validate_design(x, n_vars)
-    ride_model = mixed_pitch_plane_model(road)
-    ride = ride_model.evaluate(xb, n_vars, space)
+    paving = mixed_pitch_plane_model(road)
+    ride = paving.evaluate(xb, n_vars, space)
     hand = handling_model().evaluate_settings(
         mixed_handling_settings(to_physical(xb, n_vars, space)), inputs)
-    t_ride = ride_model.setup.duration_s - ride_model.setup.settle_s
+    t_ride = paving.setup.duration_s - paving.setup.settle_s
     t_hand = inputs.manoeuvre_s[1] - inputs.manoeuvre_s[0]
     out = {k: v for k, v in ride.items() if k not in GROUPED}
     out.update({k: v for k, v in hand.items() if k not in GROUPED})
