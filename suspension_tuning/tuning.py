@@ -1343,6 +1343,19 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
                                           for row in g_check[:4 * n_c].reshape(n_c, 4)])
         return out
 
+    restarts = 0
+    # As in optimise: a run whose corrections learnt from its full runs and that ended at
+    # the iteration limit starts again from its answer (best_of), the
+    # corrections afresh there, Dynamic-Q with its first move limit.
+    while (corrections and not cancelled and restarts < correction_options.restarts
+           and result.get('stop_test') == 'maxiter'):
+        found = best_of(0)
+        if found is None:
+            break
+        corrections.clear()
+        result, cancelled = drive(start_at(np.asarray(records[found[0]]['x'], float)))
+        nit += int(result.nit)
+        restarts += 1
     best = best_of(0)
     check: dict[str, Any] | None = None
     if best is not None and check_model is not None and not cancelled:
@@ -1395,6 +1408,10 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
                       condition_f_best=f_c.tolist(),
                       condition_g_best=g_c.tolist(), condition_metrics_best=metrics,
                       worst_condition=conditions.names[int(np.argmax(f_c))])
+    result['restarts'] = restarts
+    if restarts:
+        result['message'] = (f'{result.message} (the run restarted {restarts} time(s) from '
+                             'its answer at the iteration limit)')
     if check is not None:
         result.update(check=check)
     return result

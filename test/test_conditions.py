@@ -359,3 +359,36 @@ def test_an_answer_infeasible_at_the_check_is_continued_with_shifted_constraints
     assert not plain.check['feasible_check'] and not plain.check['continued']
     assert 'no continuation' in plain.check['not_continued']
     np.testing.assert_allclose(plain.x_best, [0.5, 0.4], atol=3e-3)
+
+
+def test_a_corrected_run_at_the_iteration_limit_restarts_once_from_its_answer(monkeypatch):
+    # simplified_correction.restarts, as for one condition (test_correction): a run over
+    # a set whose corrections engaged (the gradients give simplified values) and that
+    # reached maxiter starts once more from its answer.  The simplified model is each
+    # bowl at half its slope (values f_c / 2), so the correction has a slope to learn.
+    conditions = _bowl_set()
+
+    def half(name):
+        def gradient(x, _inputs):
+            d = np.asarray(x, float) - CENTRES[name]
+            return d, np.zeros((4, 2)), np.r_[0.5 * float(d @ d), -np.ones(4)]
+        return gradient
+
+    gradients = {name: half(name) for name in ('a', 'b')}
+    results = {}
+    for restarts in (0, 1):
+        monkeypatch.setattr(ConditionSet, 'from_text', staticmethod(lambda text: conditions))
+        request = TuningRequest('ride', 2, gradient_source='simplified', conditions='set',
+                                condition_form='worst', options={'maxiter': 3},
+                                correction={'restarts': restarts})
+        results[restarts] = optimise_conditions(request, _bowl_model, gradients)
+    assert results[0].restarts == 0 and results[0].nit == 3
+    once = results[1]
+    assert once.restarts == 1 and 'restarted 1 time(s)' in once.message
+    assert once.nit == 6  # two runs of 3 iterations, the history numbered on
+    assert [r['iteration'] for r in once.history] == list(range(len(once.history)))
+    # the second run starts at the first run's answer (its first record, after the first
+    # run's start and 3 iterations) and the answer is the best of both runs
+    first = results[0]
+    np.testing.assert_array_equal(once.history[4]['x'], first.x_best)
+    assert once.f_best <= first.f_best

@@ -129,7 +129,8 @@ class CorrectionOptions:
         A corrected run that ends at the iteration limit starts again from its answer
         this many times at most, the correction started afresh there (a blind
         variable's column seeded again) and Dynamic-Q with its first move limit
-        [E: 1, config/optimiser.yaml].
+        [E: 1, config/optimiser.yaml]; over a set of operating conditions every
+        condition's correction starts afresh.
     """
 
     method: str = 'secant'
