@@ -223,12 +223,15 @@ def print_case(scenario: str, out: dict, suffix: str) -> None:
                    for m, rs in out['results'].items()}
         ours = medians.pop('dq_simplified')
         best = min(medians, key=medians.get) if medians else ''
-        ratio = (medians[best] / ours if best and math.isfinite(ours) else math.nan)
+        if not best or not math.isfinite(ours):
+            ratio = 'none (ours does not reach the median start)'
+        else:
+            ratio = f'{medians[best] / ours:.2f}'
         print(f'{case}_median_full_runs_within_{tau:g}pct{suffix}: ours {runs(ours)} '
               f'({reached["dq_simplified"]} of {len(out["starts"])}), '
               + ', '.join(f'{m} {runs(v)} ({reached[m]} of {len(out["starts"])})'
                           for m, v in medians.items())
-              + f'; ratio vs best peer {ratio:.2f}')
+              + f'; ratio vs best peer {ratio}')
 
 
 def plot_by_n(scenario: str, cases: dict[int, dict], path: Path) -> Path:
