@@ -277,8 +277,22 @@ class PitchPlaneModel:
         if not np.isfinite(self.dt_s) or self.dt_s <= 0:
             raise ValueError(f'dt_s must be positive, got {self.dt_s}')
         p = self.params
+        self._P = np.ascontiguousarray(np.concatenate([strut_block(p),
+                                                       self._model_parameters()]))
+        sp = p.strut
+        self._dk = np.ascontiguousarray(sp.damper_velocity_mps)
+        self._dv = np.ascontiguousarray(sp.damper_force_n)
+        self._ds = np.ascontiguousarray(strut_mod.damper_knot_slopes(sp))
+        self.n_steps = int(round(self.setup.duration_s / self.dt_s))
+        if self.n_steps < 2:
+            raise ValueError('ride duration shorter than two time steps')
+        self._road = self._road_arrays()
+
+    def _model_parameters(self) -> list[float]:
+        """The kernel's parameters after the strut block (``_simplified_kernel`` PP_*)."""
+        p = self.params
         dstf, dstr = static_tyre_deflections_m(p)
-        extra = [
+        return [
             p.g_mps2,
             p.a_m,
             p.b_m,
@@ -293,15 +307,11 @@ class PitchPlaneModel:
             p.driver_x_m,
             p.passenger_x_m,
         ]
-        self._P = np.ascontiguousarray(np.concatenate([strut_block(p), extra]))
-        sp = p.strut
-        self._dk = np.ascontiguousarray(sp.damper_velocity_mps)
-        self._dv = np.ascontiguousarray(sp.damper_force_n)
-        self._ds = np.ascontiguousarray(strut_mod.damper_knot_slopes(sp))
-        self.n_steps = int(round(self.setup.duration_s / self.dt_s))
-        if self.n_steps < 2:
-            raise ValueError('ride duration shorter than two time steps')
-        self._road = self._road_arrays()
+
+    def static_tyre_loads_n(self) -> np.ndarray:
+        """Static load of each of the model's tyres [N]: one front, one rear."""
+        return np.array([self.params.static_tyre_load_front_n,
+                         self.params.static_tyre_load_rear_n])
 
     def _road_arrays(self) -> tuple[np.ndarray, ...]:
         """Centreline road and its rate under each axle at every half step."""
@@ -374,9 +384,8 @@ class PitchPlaneModel:
         """
         xb = validate_design(x, n_vars)
         rec = self.simulate(to_physical(xb, n_vars, space))
-        static = np.array([self.params.static_tyre_load_front_n,
-                           self.params.static_tyre_load_rear_n])
-        return ride_metrics(rec, self.setup.settle_s, static, self.soft_load_fraction)
+        return ride_metrics(rec, self.setup.settle_s, self.static_tyre_loads_n(),
+                            self.soft_load_fraction)
 
 
 def ride_metrics(rec: PitchPlaneRecord, settle_s: float,
@@ -384,26 +393,28 @@ def ride_metrics(rec: PitchPlaneRecord, settle_s: float,
                  load_fraction: float | None = None) -> dict[str, np.ndarray]:
     """Eq. 9 objective and eq. 11 constraints of a pitch-plane record (full-model rules).
 
-    With the static wheel loads (front, rear, N) and a load fraction, also 'g_soft':
-    :func:`~suspension_tuning.vehicle.metrics.soft_tyre_hop_constraints` per corner,
-    the tyre-hop measure for gradients.
+    With the static wheel loads (one per tyre of the record, N) and a load fraction, also
+    'g_soft': :func:`~suspension_tuning.vehicle.metrics.soft_tyre_hop_constraints` per
+    corner, the tyre-hop measure for gradients.  A record of one front and one rear
+    tyre gives each corner its axle's value; a record of four tyres its own.
     """
     fs = 1.0 / rec.dt_s
     # one call for both seats: comfort.wb_sos designs the filter per call (~3 ms)
     acc = np.stack([rec.acc_driver_mps2, rec.acc_passenger_mps2])
     a_d, a_p = np.atleast_2d(weighted_rms(acc, fs, settle_s))
     keep = rec.t_s >= settle_s  # the full model counts lift-off after settling too
-    g2 = tyre_hop_constraints(rec.tyre_fz_n[..., keep], rec.dt_s)
+    corners = [0, 0, 1, 1] if rec.tyre_fz_n.shape[-2] == 2 else slice(None)
+    g = tyre_hop_constraints(rec.tyre_fz_n[..., keep], rec.dt_s)
     out = {
         'f': f_ride(a_d, a_p),
-        'g': g2[:, [0, 0, 1, 1]],
+        'g': g[:, corners],
         'a_rms_driver_mps2': a_d,
         'a_rms_passenger_mps2': a_p,
     }
     if static_load_n is not None and load_fraction is not None:
         soft = soft_tyre_hop_constraints(rec.tyre_fz_n[..., keep], static_load_n,
                                          load_fraction)
-        out['g_soft'] = soft[:, [0, 0, 1, 1]]
+        out['g_soft'] = soft[:, corners]
     return out
 
 

@@ -33,82 +33,41 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _simplified_kernel as SK  # noqa: N812
-from . import strut as strut_mod
-from .comfort import weighted_rms
-from .design import AxleSettings, DesignSpace, to_physical, validate_design
-from .metrics import f_ride, soft_tyre_hop_constraints, tyre_hop_constraints
-from .params import VehicleParams, load_vehicle_params
+from .design import AxleSettings
 from .pitch_plane import (
-    RideSetup,
+    PitchPlaneModel,
+    PitchPlaneRecord,
     axle_strut_states,
-    load_simplified_config,
     static_tyre_deflections_m,
-    strut_block,
 )
 
 
 @dataclass
-class RollPitchRecord:
+class RollPitchRecord(PitchPlaneRecord):
     """Outputs of a roll-and-pitch run at every integration step (leading design axis).
 
-    Attributes
-    ----------
-    t_s : np.ndarray
-        Times (n,) [s].
-    acc_driver_mps2, acc_passenger_mps2 : np.ndarray
-        Vertical seat accelerations (batch, n) [m/s^2].
-    tyre_fz_n : np.ndarray
-        Tyre vertical forces FL, FR, RL, RR (batch, 4, n) [N].
-    heave_m, pitch_rad, roll_rad : np.ndarray
-        Body heave (up), pitch (nose down) and roll (left side up) (batch, n).
-    strut_force_n : np.ndarray
-        Strut forces FL, FR, RL, RR (batch, 4, n) [N].
+    A pitch-plane record (``t_s``, seat accelerations, heave, pitch) whose tyre and
+    strut forces are per corner, FL, FR, RL, RR: ``tyre_fz_n`` and ``strut_force_n``
+    (batch, 4, n) [N], ``road_m`` the road under each corner (4, n) [m]; and the body's
+    roll ``roll_rad`` (left side up) (batch, n).
     """
 
-    t_s: np.ndarray
-    acc_driver_mps2: np.ndarray
-    acc_passenger_mps2: np.ndarray
-    tyre_fz_n: np.ndarray
-    heave_m: np.ndarray
-    pitch_rad: np.ndarray
     roll_rad: np.ndarray
-    strut_force_n: np.ndarray
-
-    @property
-    def dt_s(self) -> float:
-        """Time step [s]."""
-        return float(self.t_s[1] - self.t_s[0])
 
 
-class RollPitchModel:
+class RollPitchModel(PitchPlaneModel):
     """Batched roll-and-pitch ride model on the ride scenario's two tracks.
 
-    Parameters
-    ----------
-    params : VehicleParams, optional
-        Vehicle parameters (default config/*.yaml).
-    setup : RideSetup, optional
-        Road, speed and duration (default: config/scenarios.yaml 'ride').
-    dt_s : float, optional
-        RK4 step [s] (default config/simplified_models.yaml pitch_plane.time_step_s).
+    Same parameters as :class:`~.pitch_plane.PitchPlaneModel` (vehicle, ride setup, RK4
+    step of config/simplified_models.yaml ``pitch_plane.time_step_s``); f and g come
+    from the same rules (:func:`~.pitch_plane.ride_metrics`), g for each tyre.
     """
 
-    def __init__(
-        self,
-        params: VehicleParams | None = None,
-        setup: RideSetup | None = None,
-        dt_s: float | None = None,
-    ) -> None:
-        self.params = params if params is not None else load_vehicle_params()
-        self.setup = setup if setup is not None else RideSetup.from_scenario_config(self.params)
-        config = load_simplified_config()
-        self.soft_load_fraction = float(config['tyre_hop_gradient']['load_fraction'])
-        self.dt_s = float(dt_s if dt_s is not None else config['pitch_plane']['time_step_s'])
-        if not np.isfinite(self.dt_s) or self.dt_s <= 0:
-            raise ValueError(f'dt_s must be positive, got {self.dt_s}')
+    def _model_parameters(self) -> list[float]:
+        """The kernel's parameters after the strut block (``_simplified_kernel`` RP_*)."""
         p = self.params
         dstf, dstr = static_tyre_deflections_m(p)
-        extra = [
+        return [
             p.g_mps2,
             p.a_m,
             p.b_m,
@@ -130,15 +89,11 @@ class RollPitchModel:
             p.passenger_x_m,
             p.passenger_y_m,
         ]
-        self._P = np.ascontiguousarray(np.concatenate([strut_block(p), extra]))
-        sp = p.strut
-        self._dk = np.ascontiguousarray(sp.damper_velocity_mps)
-        self._dv = np.ascontiguousarray(sp.damper_force_n)
-        self._ds = np.ascontiguousarray(strut_mod.damper_knot_slopes(sp))
-        self.n_steps = int(round(self.setup.duration_s / self.dt_s))
-        if self.n_steps < 2:
-            raise ValueError('ride duration shorter than two time steps')
-        self._zc, self._zcd = self._road_arrays()
+
+    def static_tyre_loads_n(self) -> np.ndarray:
+        """Static load of each tyre, FL, FR, RL, RR [N]."""
+        front, rear = super().static_tyre_loads_n()
+        return np.array([front, front, rear, rear])
 
     def _road_arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """Road and its rate under each corner (FL, FR, RL, RR) at every half step."""
@@ -170,8 +125,9 @@ class RollPitchModel:
         b = ss.shape[0]
         states = np.zeros((b, SK.N_RP_STATE))
         out = np.empty((b, self.n_steps, SK.N_RP_OUT))
-        SK.rp_integrate(states, ss, self._P, self._dk, self._dv, self._ds, self._zc,
-                        self._zcd, self.dt_s, self.n_steps, out)
+        zc, zcd = self._road
+        SK.rp_integrate(states, ss, self._P, self._dk, self._dv, self._ds, zc, zcd,
+                        self.dt_s, self.n_steps, out)
         if not np.all(np.isfinite(out)):
             raise RuntimeError('roll-and-pitch integration diverged (non-finite outputs)')
         out = out.transpose(0, 2, 1)  # (batch, channel, time) views
@@ -182,42 +138,7 @@ class RollPitchModel:
             tyre_fz_n=out[:, SK.RO_FZ0:SK.RO_FZ0 + 4],
             heave_m=out[:, SK.RO_ZS],
             pitch_rad=out[:, SK.RO_TH],
-            roll_rad=out[:, SK.RO_PHI],
             strut_force_n=out[:, SK.RO_FS0:SK.RO_FS0 + 4],
+            road_m=zc[:, 0:-1:2],
+            roll_rad=out[:, SK.RO_PHI],
         )
-
-    def evaluate(self, x: np.ndarray, n_vars: int,
-                 space: DesignSpace | None = None) -> dict[str, np.ndarray]:
-        """Objective eq. 9 and constraints eq. 11 (per tyre) for normalised designs.
-
-        Parameters
-        ----------
-        x : array_like
-            Designs, shape (n_vars,) or (batch, n_vars), in [0.001, 1] (eqs. 5-8).
-        n_vars : int
-            The design space's size.
-        space : DesignSpace, optional
-            The design space (default config/design_space.yaml).
-
-        Returns
-        -------
-        dict
-            'f' (batch,), 'g' and 'g_soft' (batch, 4) in the order FL, FR, RL, RR, and
-            'a_rms_driver_mps2', 'a_rms_passenger_mps2' (batch,).
-        """
-        xb = validate_design(x, n_vars)
-        rec = self.simulate(to_physical(xb, n_vars, space))
-        p = self.params
-        static = np.array([p.static_tyre_load_front_n] * 2 + [p.static_tyre_load_rear_n] * 2)
-        fs = 1.0 / rec.dt_s
-        acc = np.stack([rec.acc_driver_mps2, rec.acc_passenger_mps2])
-        a_d, a_p = np.atleast_2d(weighted_rms(acc, fs, self.setup.settle_s))
-        keep = rec.t_s >= self.setup.settle_s
-        fz = rec.tyre_fz_n[..., keep]
-        return {
-            'f': f_ride(a_d, a_p),
-            'g': tyre_hop_constraints(fz, rec.dt_s),
-            'g_soft': soft_tyre_hop_constraints(fz, static, self.soft_load_fraction),
-            'a_rms_driver_mps2': a_d,
-            'a_rms_passenger_mps2': a_p,
-        }
