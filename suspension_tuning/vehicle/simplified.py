@@ -12,8 +12,9 @@ process (building the ride road costs one road synthesis).
 The 'mixed' scenario (rough road, then the double lane change, the 4S4 valves switched
 by the controller) has no model of its own in the paper; its simplified model is the two
 the paper has, each in the state the valve controller engages there
-(:func:`run_mixed_simplified`): the pitch-plane model on the paving at the mixed
-scenario's speed and length in the ride state, the handling model on the lane change in
+(:func:`run_mixed_simplified`): a ride model (by default the roll-and-pitch one,
+:func:`ride_model_kind`) on the paving at the mixed scenario's speed and length in the
+ride state, the handling model on the lane change in
 the handling state, with f their mean as the full scenario's f (eqs. 9, 10) and g eq. 11
 over both parts, weighted by their durations.
 """
@@ -114,16 +115,20 @@ class SimplifiedInputs:
 ROLL_TARGETS = ('anti_roll_bar',)
 
 
-def ride_model_kind(n_vars: int, space: DesignSpace | None = None) -> str:
-    """The ride scenario's simplified model for a design: 'pitch_plane' or 'roll_pitch'.
+def ride_model_kind(n_vars: int, space: DesignSpace | None = None,
+                    scenario: str = 'ride') -> str:
+    """The simplified ride model for a design: 'pitch_plane' or 'roll_pitch'.
 
     config/simplified_models.yaml ``ride_model``; 'auto' picks the roll-and-pitch model
-    when a design variable acts in roll only (:data:`ROLL_TARGETS`), else the paper's
-    pitch-plane model.
+    for the mixed scenario's paving (the paper has no model of that scenario) and, on
+    the ride scenario, when a design variable acts in roll only (:data:`ROLL_TARGETS`);
+    else the paper's pitch-plane model.
     """
     kind = load_simplified_config()['ride_model']
     if kind != 'auto':
         return kind
+    if scenario == 'mixed':
+        return 'roll_pitch'
     space = space if space is not None else load_design_space()
     targets = {v.target for v in space.design_variables(n_vars)}
     return 'roll_pitch' if targets & set(ROLL_TARGETS) else 'pitch_plane'
@@ -230,8 +235,12 @@ def run_simplified(
 
 
 @functools.lru_cache(maxsize=8)
-def mixed_pitch_plane_model(road: str = '') -> PitchPlaneModel:
-    """The pitch-plane model on the mixed scenario's paving (config/mixed.yaml).
+def mixed_ride_model(road: str = '', kind: str = 'roll_pitch'
+                     ) -> PitchPlaneModel | RollPitchModel:
+    """A ride model on the mixed scenario's paving (config/mixed.yaml).
+
+    ``kind``: 'roll_pitch' (:class:`~.roll_pitch.RollPitchModel`) or 'pitch_plane'
+    (eqs. 15-24).
 
     The ride scenario's road (or ``road``) at the mixed scenario's speed, for as long as
     the full run stays on the paving (``rough_length_m``; at least one second after the
@@ -251,7 +260,8 @@ def mixed_pitch_plane_model(road: str = '') -> PitchPlaneModel:
     settle = float(cfg['settle_s'])
     ride.update(speed_kmh=float(cfg['speed_kmh']), settle_s=settle,
                 duration_s=max(float(cfg['rough_length_m']) / speed, settle + 1.0))
-    return PitchPlaneModel(params, RideSetup.from_scenario_config(params, scenarios))
+    model = RollPitchModel if kind == 'roll_pitch' else PitchPlaneModel
+    return model(params, RideSetup.from_scenario_config(params, scenarios))
 
 
 def mixed_handling_settings(settings: AxleSettings) -> AxleSettings:
@@ -280,7 +290,7 @@ def run_mixed_simplified(x: np.ndarray, n_vars: int, inputs: HandlingInputs, roa
                          space: DesignSpace | None = None) -> dict[str, np.ndarray]:
     """The mixed scenario's simplified model: the paper's two, each in its valve state.
 
-    The pitch-plane model (eqs. 15-24) on the paving (:func:`mixed_pitch_plane_model`)
+    A ride model on the paving (:func:`mixed_ride_model`, :func:`ride_model_kind`)
     in the ride state and the handling model (eqs. 12-14) on the lane change (``inputs``
     from the full mixed run) in the handling state (:func:`mixed_handling_settings`).
     f = (f_ride + f_hand) / 2 as the full run's (eqs. 9, 10); g (eq. 11) from the
@@ -298,7 +308,7 @@ def run_mixed_simplified(x: np.ndarray, n_vars: int, inputs: HandlingInputs, roa
         'roll_rate_rms_deg_s').
     """
     xb = validate_design(x, n_vars)
-    paving = mixed_pitch_plane_model(road)
+    paving = mixed_ride_model(road, ride_model_kind(n_vars, space, 'mixed'))
     ride = paving.evaluate(xb, n_vars, space)
     hand = handling_model().evaluate_settings(
         mixed_handling_settings(to_physical(xb, n_vars, space)), inputs)
