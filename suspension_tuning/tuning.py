@@ -528,10 +528,7 @@ def optimise(request: TuningRequest, full_model: FullModel,
                                              correction_options, corrections, callback,
                                              counter, lower, upper, options, staircase)
         restarts += 1
-    result['restarts'] = restarts
-    if restarts:
-        result['message'] = (f'{result.message} (the run restarted {restarts} time(s) from '
-                             'its answer at the iteration limit)')
+    _note_restarts(result, restarts)
     check: dict[str, Any] | None = None
     if check_model is not None and not cancelled and 'x_best' in result:
         result, check = _check_and_continue(
@@ -604,6 +601,14 @@ def _drive(opt: DynamicQ, request: TuningRequest, terms: _ConstraintTerms,
             opt.stop('cancelled')
             cancelled = True
     return cancelled
+
+
+def _note_restarts(result: OptimizeResult, restarts: int) -> None:
+    """Put how often the run restarted from its answer in ``result`` and its message."""
+    result['restarts'] = restarts
+    if restarts:
+        result['message'] = (f'{result.message} (the run restarted {restarts} time(s) from '
+                             'its answer at the iteration limit)')
 
 
 def _run_from_answer(result: OptimizeResult, request: TuningRequest,
@@ -1408,10 +1413,7 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
                       condition_f_best=f_c.tolist(),
                       condition_g_best=g_c.tolist(), condition_metrics_best=metrics,
                       worst_condition=conditions.names[int(np.argmax(f_c))])
-    result['restarts'] = restarts
-    if restarts:
-        result['message'] = (f'{result.message} (the run restarted {restarts} time(s) from '
-                             'its answer at the iteration limit)')
+    _note_restarts(result, restarts)
     if check is not None:
         result.update(check=check)
     return result

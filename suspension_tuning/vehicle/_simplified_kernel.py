@@ -3,7 +3,9 @@
 This is the only compiled module of the simplified models.  ``pitch_plane.py`` and
 ``handling_model.py`` hold plain numpy implementations of the same equations built on
 ``strut.strut_force`` and ``tyre.vertical_force`` / ``tyre.pacejka89_lateral``; the tests
-check the kernels against them.  The damper (cubic Hermite through the PCHIP slopes of
+check the kernels against them.  The roll-and-pitch kernel (``rp_*``, ``roll_pitch.py``)
+is checked against the pitch-plane kernel on identical tracks and against the full model
+per tyre (test/test_roll_pitch.py).  The damper (cubic Hermite through the PCHIP slopes of
 ``strut.damper_knot_slopes``), the C1 stop ramp and the Pacejka '89 formula are the
 compiled helpers of the full model (``_kernel._hermite``, ``_pen``, ``_pacejka``).
 
@@ -542,7 +544,6 @@ def _rp_integrate_design(bi, states, sstates, P, dk, dv, ds, zc, zcd, dt, n_step
     q = states[bi, :n].copy()
     v = states[bi, n:].copy()
     qs = np.empty(n)
-    vs = np.empty(n)
     k1 = np.empty(n)
     k2 = np.empty(n)
     k3 = np.empty(n)
@@ -552,8 +553,6 @@ def _rp_integrate_design(bi, states, sstates, P, dk, dv, ds, zc, zcd, dt, n_step
     l4 = np.empty(n)
     fz = np.empty(4)
     fs = np.empty(4)
-    fz2 = np.empty(4)
-    fs2 = np.empty(4)
     z0 = np.empty(4)
     z0d = np.empty(4)
     z1 = np.empty(4)
@@ -575,16 +574,17 @@ def _rp_integrate_design(bi, states, sstates, P, dk, dv, ds, zc, zcd, dt, n_step
         out[bi, k, RO_ZS] = q[0]
         out[bi, k, RO_TH] = q[1]
         out[bi, k, RO_PHI] = q[2]
-        # stage 2: rates v + h/2 k1 (l2), positions q + h/2 v
+        # stage 2: rates v + h/2 k1 (l2), positions q + h/2 v; the forces of stages 2-4
+        # are not outputs, fz and fs take them
         for m in range(n):
             qs[m] = q[m] + h2 * v[m]
             l2[m] = v[m] + h2 * k1[m]
-        rp_deriv(qs, l2, ss, P, dk, dv, ds, z1, z1d, k2, fz2, fs2)
+        rp_deriv(qs, l2, ss, P, dk, dv, ds, z1, z1d, k2, fz, fs)
         # stage 3
         for m in range(n):
             qs[m] = q[m] + h2 * l2[m]
             l3[m] = v[m] + h2 * k2[m]
-        rp_deriv(qs, l3, ss, P, dk, dv, ds, z1, z1d, k3, fz2, fs2)
+        rp_deriv(qs, l3, ss, P, dk, dv, ds, z1, z1d, k3, fz, fs)
         # stage 4
         for m in range(n):
             qs[m] = q[m] + dt * l3[m]
@@ -592,11 +592,9 @@ def _rp_integrate_design(bi, states, sstates, P, dk, dv, ds, zc, zcd, dt, n_step
         for c in range(4):
             z0[c] = zc[c, j + 2]
             z0d[c] = zcd[c, j + 2]
-        rp_deriv(qs, l4, ss, P, dk, dv, ds, z0, z0d, k4, fz2, fs2)
+        rp_deriv(qs, l4, ss, P, dk, dv, ds, z0, z0d, k4, fz, fs)
         for m in range(n):
             q[m] += dt / 6.0 * (v[m] + 2.0 * l2[m] + 2.0 * l3[m] + l4[m])
-            vs[m] = v[m] + dt / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
-        for m in range(n):
-            v[m] = vs[m]
+            v[m] += dt / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
     states[bi, :n] = q
     states[bi, n:] = v

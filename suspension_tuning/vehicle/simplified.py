@@ -113,6 +113,8 @@ class SimplifiedInputs:
 
 #: Design-variable targets that act in roll only: the pitch-plane model cannot see them.
 ROLL_TARGETS = ('anti_roll_bar',)
+#: config/simplified_models.yaml ``ride_model`` (other than 'auto') -> the model's class.
+RIDE_MODEL_CLASSES = {'pitch_plane': PitchPlaneModel, 'roll_pitch': RollPitchModel}
 
 
 def ride_model_kind(n_vars: int, space: DesignSpace | None = None,
@@ -136,7 +138,7 @@ def ride_model_kind(n_vars: int, space: DesignSpace | None = None,
 
 @functools.lru_cache(maxsize=16)
 def ride_model(road: str = '', condition: str = '',
-                      kind: str = 'pitch_plane') -> PitchPlaneModel | RollPitchModel:
+               kind: str = 'pitch_plane') -> PitchPlaneModel | RollPitchModel:
     """The ride model (config files), built once per process, road, condition and kind.
 
     ``road``: the ride road in place of config/scenarios.yaml's (a road name, a road
@@ -146,7 +148,7 @@ def ride_model(road: str = '', condition: str = '',
     (the eq. 15-24 model's inputs follow them); '' = none.  ``kind``: 'pitch_plane'
     (eqs. 15-24) or 'roll_pitch' (:class:`~.roll_pitch.RollPitchModel`).
     """
-    model = RollPitchModel if kind == 'roll_pitch' else PitchPlaneModel
+    model = RIDE_MODEL_CLASSES[kind]
     if not road and not condition:
         return model()
     from .params import load_scenarios_config, load_vehicle_params
@@ -260,8 +262,7 @@ def mixed_ride_model(road: str = '', kind: str = 'roll_pitch'
     settle = float(cfg['settle_s'])
     ride.update(speed_kmh=float(cfg['speed_kmh']), settle_s=settle,
                 duration_s=max(float(cfg['rough_length_m']) / speed, settle + 1.0))
-    model = RollPitchModel if kind == 'roll_pitch' else PitchPlaneModel
-    return model(params, RideSetup.from_scenario_config(params, scenarios))
+    return RIDE_MODEL_CLASSES[kind](params, RideSetup.from_scenario_config(params, scenarios))
 
 
 def mixed_handling_settings(settings: AxleSettings) -> AxleSettings:
