@@ -56,6 +56,7 @@ def resume(bag: str | os.PathLike[str], max_iterations: int | None = None,
     options = dict(config.get('optimiser_options') or {})
     if max_iterations is not None:
         options['maxiter'] = int(max_iterations)
+        options['maxiter_variables'] = 0
     request = TuningRequest(config['scenario'], int(config['n_vars']), config['x0'],
                             config['gradient_source'], options, float(config['fd_step']),
                             config.get('constraints') or (),

@@ -321,6 +321,18 @@ def test_maxiter_stops_unsuccessfully():
     assert result.ngev == 5  # no gradient is asked at the last point
 
 
+def test_iteration_limit_grows_in_proportion_above_maxiter_variables():
+    # Rosenbrock (2 variables) does not converge in 6 iterations from (-1.2, 1), so each
+    # run ends at its limit: maxiter 3 holds for up to maxiter_variables = 2 variables and
+    # becomes ceil(3 x 2 / 1) = 6 when it holds for 1
+    kept = _solve(rosenbrock_interior(), options={'maxiter': 3, 'maxiter_variables': 2})
+    grown = _solve(rosenbrock_interior(), options={'maxiter': 3, 'maxiter_variables': 1})
+    assert (kept.nit, kept.status) == (3, 3)
+    assert (grown.nit, grown.status) == (6, 3)
+    with pytest.raises(ValueError, match='maxiter_variables'):
+        _solve(rosenbrock_interior(), options={'maxiter_variables': -1})
+
+
 def test_results_are_deterministic():
     first = _solve(hs7())
     second = _solve(hs7())

@@ -418,7 +418,9 @@ class CoordinatorNode(Node):
     def _request(self, goal: Optimise.Goal) -> TuningRequest:
         options = self.options.as_dict()
         if goal.max_iterations:
+            # the goal's limit is the limit, whatever the number of variables
             options['maxiter'] = int(goal.max_iterations)
+            options['maxiter_variables'] = 0
         if goal.move_limit:
             options['rho0'] = float(goal.move_limit)
         constraints = [(c.scenario, c.quantity, c.upper_bound) for c in goal.constraints]

@@ -173,6 +173,12 @@ class DynamicQOptions:
         Feasibility tolerance on g_j and |h_k| [E: 1e-6].
     maxiter : int
         Maximum number of iterations (subproblems solved) [E: 100].
+    maxiter_variables : int
+        ``maxiter`` holds up to this many variables; with more, n, the iteration limit
+        grows in proportion, ceil(maxiter n / maxiter_variables), so that a larger design
+        keeps the iterations per variable.  0 keeps ``maxiter`` for every n [E: 0 for
+        analytic problems; 4 for the vehicle, whose 30 iterations are the paper's budget
+        for its 4 variables].
     curvature_cap : float
         Curvatures are clipped to [-cap, cap]; inf disables [E: inf for
         analytic problems, 1e3 for noisy ones, physics-reference 1.2].
@@ -231,6 +237,7 @@ class DynamicQOptions:
     ftol: float = 1e-8
     gtol: float = 1e-6
     maxiter: int = 100
+    maxiter_variables: int = 0
     curvature_cap: float = math.inf
     surrogate_constraint_curvature: str = 'interpolate'
     surrogate_objective_curvature: str = 'interpolate'
@@ -260,6 +267,9 @@ class DynamicQOptions:
             raise ValueError(f"worse_step must be 'accept' or 'reject', got {self.worse_step!r}")
         if int(self.maxiter) != self.maxiter or self.maxiter < 0:
             raise ValueError(f'maxiter must be an integer >= 0, got {self.maxiter!r}')
+        if int(self.maxiter_variables) != self.maxiter_variables or self.maxiter_variables < 0:
+            raise ValueError(f'maxiter_variables must be an integer >= 0, got '
+                             f'{self.maxiter_variables!r}')
         if np.isnan(self.curvature_cap) or self.curvature_cap <= 0:
             raise ValueError(
                 f'curvature_cap must be > 0 (inf allowed), got {self.curvature_cap!r}'
@@ -644,6 +654,15 @@ class DynamicQ:
         return self._pending is None
 
     @property
+    def max_iterations(self) -> int:
+        """The iteration limit: ``maxiter``, grown in proportion above ``maxiter_variables``."""
+        opt = self.options
+        n, n_ref = self.x0.size, int(opt.maxiter_variables)
+        if n_ref <= 0 or n <= n_ref:
+            return int(opt.maxiter)
+        return math.ceil(int(opt.maxiter) * n / n_ref)
+
+    @property
     def rho(self) -> float:
         """Current move limit."""
         return self._rho
@@ -977,7 +996,7 @@ class DynamicQ:
                 subproblem=None,
             )
         while True:
-            if self._iteration() >= opt.maxiter:
+            if self._iteration() >= self.max_iterations:
                 self.status = 3
                 break
             if cur.df is None:
