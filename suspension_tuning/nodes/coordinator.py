@@ -1,7 +1,8 @@
 """ROS 2 node ``coordinator``: the Dynamic-Q optimisation as an action server.
 
-Action ``~/optimise`` (Optimise): scenario, 2 or 4 variables, start point, gradient
-source 'simplified' or 'full', limits, and extra constraints on another scenario's
+Action ``~/optimise`` (Optimise): scenario, n variables (2 or 4, or the size of a
+config/design_space.yaml preset), start point, gradient source 'simplified' or 'full',
+limits, and extra constraints on another scenario's
 objective or any named metric (``tuning.ConstraintSpec``; their scenarios run on the
 same workers, their simplified gradients on the same gradient evaluator).  Each
 iteration asks the simulation workers (``/<worker>/evaluate``) for the full-model
