@@ -7,13 +7,17 @@ optimum are about 0.015 lower than the converged solution's (docs/noise_study.md
 :func:`check_design` runs the reported design once more by Dormand-Prince 5(4) at the
 tightened tolerance of config/vehicle.yaml ``integration.check`` (same output grid);
 :func:`suspension_tuning.tuning.check_summary` gives the two verdicts.  The run counts
-as a paid full run.
+as a paid full run.  An answer the check finds infeasible is continued
+(``integration.check.continue_by``): on the check's model itself from the answer
+(``tighter_model``, :func:`check_options`' model with its metrics and inputs) or on the
+run's model with the constraints shifted by the check's offset (``shift``).
 An FMU is checked by the tolerance of FMI's ``setupExperiment`` where the FMU supports
 it; this module serves the built-in model.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,27 +27,40 @@ from numpy.typing import ArrayLike
 
 from suspension_tuning.paths import config_dir, read_yaml
 
+#: The check model's key in config/optimiser.yaml ``noise_levels`` (per scenario).
+CHECK_INTEGRATOR = 'check'
+
+#: How a run continues when the check finds its answer infeasible: 'shift' (on the run's
+#: model, the eq. 11 constraints shifted by the offset the check measured) or
+#: 'tighter_model' (on the check's model itself, from the answer).
+CONTINUE_BY = ('shift', 'tighter_model')
+
 
 @dataclass(frozen=True)
 class CheckSettings:
     """Settings of the check run (config/vehicle.yaml ``integration.check``).
 
     ``rtol``, ``atol``: DOPRI5's error tolerances; ``gtol``: the check's feasibility
-    tolerance on g; ``continuations``: shifted continuations at most.
+    tolerance on g; ``continuations``: shifted continuations at most; ``continue_by``:
+    how a run whose answer the check finds infeasible goes on (:data:`CONTINUE_BY`).
     """
 
     rtol: float
     atol: float
     gtol: float = 5e-3
     continuations: int = 2
+    continue_by: str = 'shift'
 
     def __post_init__(self) -> None:
-        """Positive, finite tolerances (ValueError naming the setting)."""
+        """Positive, finite tolerances, a known continuation (ValueError naming the key)."""
         for name in ('rtol', 'atol'):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0.0):
                 raise ValueError(f'integration.check.{name} must be positive and finite, '
                                  f'got {value}')
+        if self.continue_by not in CONTINUE_BY:
+            raise ValueError(f'integration.check.continue_by must be one of '
+                             f'{", ".join(CONTINUE_BY)}, got {self.continue_by!r}')
 
 
 def load_check_settings(path: str | Path | None = None) -> CheckSettings:
@@ -53,7 +70,8 @@ def load_check_settings(path: str | Path | None = None) -> CheckSettings:
     if check is None:
         raise ValueError('config/vehicle.yaml has no integration.check (rtol, atol)')
     return CheckSettings(float(check['rtol']), float(check['atol']),
-                         float(check.get('gtol', 5e-3)), int(check.get('continuations', 2)))
+                         float(check.get('gtol', 5e-3)), int(check.get('continuations', 2)),
+                         str(check.get('continue_by', 'shift')))
 
 
 def check_design(scenario: str, n_vars: int, x: ArrayLike,
@@ -65,7 +83,10 @@ def check_design(scenario: str, n_vars: int, x: ArrayLike,
 
 def _check_run(scenario: str, n_vars: int, x: ArrayLike, settings: CheckSettings | None,
                condition: Any = None) -> Any:
-    """One design's run at the check's tolerance (in ``condition``: its vehicle, speeds)."""
+    """Designs' runs at the check's tolerance (in ``condition``: its vehicle, speeds).
+
+    ``x``: one design (n,) or a batch (m, n).
+    """
     from suspension_tuning.conditions import condition_params, condition_scenarios
     from suspension_tuning.vehicle.params import load_vehicle_params, with_integrator
     from suspension_tuning.vehicle.runs import run_full
@@ -74,32 +95,44 @@ def _check_run(scenario: str, n_vars: int, x: ArrayLike, settings: CheckSettings
     params = with_integrator(load_vehicle_params(), 'variable_step', rtol=settings.rtol,
                              atol=settings.atol)
     # 'mixed': in-process valve controllers (the same bits as over ROS); no conditions
-    return run_full(scenario, np.asarray(x, float)[None, :],
+    return run_full(scenario, np.atleast_2d(np.asarray(x, float)),
                     params=condition_params(condition, params), n_vars=n_vars,
                     config=None if condition is None else condition_scenarios(condition),
                     integrator='variable_step')
 
 
-def check_options(scenario: str, n_vars: int, settings: CheckSettings | None = None
-                  ) -> dict[str, Any]:
+def check_options(scenario: str, n_vars: int, settings: CheckSettings | None = None,
+                  inputs: Callable[[Any], Any] | None = None) -> dict[str, Any]:
     """``tuning.optimise``'s check arguments for the built-in model of a scenario.
 
-    ``check_model`` (designs (1, n) -> ``FullEvaluation`` at the tighter tolerance),
-    ``check_gtol`` and ``check_continuations`` (config/vehicle.yaml ``integration.check``):
-    what the coordinator passes for the built-in model, and an in-process run that
-    must reach the same bits.
+    ``check_model`` (designs (1, n) -> ``FullEvaluation`` at the tighter tolerance, with
+    the named metrics and the simplified model's inputs), ``check_gtol``,
+    ``check_continuations``, ``check_continue_by`` (config/vehicle.yaml
+    ``integration.check``) and ``check_noise``, the check model's noise levels (f, g)
+    (config/optimiser.yaml ``noise_levels``, integrator ``check``) for a run continued
+    on it: what the coordinator passes for the built-in model, and an in-process run
+    that must reach the same bits.  ``inputs``: scenario result -> what the scenario's
+    simplified gradient takes (default the result itself, as in-process gradients take
+    it; the coordinator packs it as the simulation node does).
     """
-    from suspension_tuning.tuning import FullEvaluation
+    from suspension_tuning.evaluation import metric_table
+    from suspension_tuning.tuning import FullEvaluation, noise_levels
 
     settings = load_check_settings() if settings is None else settings
 
     def model(designs: ArrayLike) -> FullEvaluation:
-        f, g = check_design(scenario, n_vars, np.atleast_2d(np.asarray(designs, float))[0],
-                            settings)
-        return FullEvaluation(np.array([f]), g[None, :])
+        x = np.atleast_2d(np.asarray(designs, float))
+        res = _check_run(scenario, n_vars, x, settings)
+        names, table = metric_table(res.metrics, len(x))
+        return FullEvaluation(np.asarray(res.f, float).copy(),
+                              np.asarray(res.g, float).copy(),
+                              inputs=res if inputs is None else inputs(res),
+                              metric_names=names, metrics=table)
 
     return {'check_model': model, 'check_gtol': settings.gtol,
-            'check_continuations': settings.continuations}
+            'check_continuations': settings.continuations,
+            'check_continue_by': settings.continue_by,
+            'check_noise': noise_levels(scenario, CHECK_INTEGRATOR)}
 
 
 def check_condition_options(scenario: str, n_vars: int,

@@ -61,7 +61,9 @@ def _message(error: Exception, tracker: KeyTracker, default_file: str) -> str:
         return f'{source}: missing key {key or text}'
     if 'convert' in text or 'must be a real number' in text or 'argument must be' in text:
         return f'{source}: {key}: expected a number, {text}'
-    return f'{source}: {text}' if not key else f'{source}: {key}: {text}'
+    if not key or text.startswith(key):  # the loader named the key already
+        return f'{source}: {text}'
+    return f'{source}: {key}: {text}'
 
 
 def check_design_space(builtin_model: bool = True, path: str | Path | None = None) -> None:
@@ -113,6 +115,7 @@ def check_config(builtin_model: bool = True) -> None:
         _run(lambda p=path: read_yaml(p), _relative(path))
     check_design_space(builtin_model)
 
+    from suspension_tuning.answer_check import load_check_settings
     from suspension_tuning.optim.correction import load_correction_options
     from suspension_tuning.optim.dynamic_q import load_options
     from suspension_tuning.optim.scaling import load_min_fit_r2
@@ -123,6 +126,7 @@ def check_config(builtin_model: bool = True) -> None:
 
     params = {}
     _run(lambda: params.setdefault('vehicle', load_vehicle_params()), 'config/vehicle.yaml')
+    _run(load_check_settings, 'config/vehicle.yaml')
     _run(lambda: ride_road_spec(load_scenarios_config()['ride']), 'config/scenarios.yaml')
     _run(lambda: load_manoeuvre(params['vehicle'].wheelbase_m), 'config/manoeuvre.yaml')
     _run(load_simplified_config, 'config/simplified_models.yaml')

@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import OptimizeResult
 
+from suspension_tuning.answer_check import CONTINUE_BY
 from suspension_tuning.optim.correction import CorrectionOptions, SecantCorrection
 from suspension_tuning.optim.dynamic_q import DynamicQ, DynamicQOptions
 from suspension_tuning.optim.finite_diff import central_difference
@@ -423,6 +424,8 @@ def optimise(request: TuningRequest, full_model: FullModel,
              check_model: FullModel | None = None,
              check_gtol: float = 5e-3,
              check_continuations: int = 2,
+             check_continue_by: str = 'shift',
+             check_noise: tuple[float, float] | None = None,
              ) -> OptimizeResult:
     """Run Dynamic-Q on the full model with the requested gradient source.
 
@@ -461,9 +464,16 @@ def optimise(request: TuningRequest, full_model: FullModel,
         found it feasible, the run continues from it with every eq. 11 constraint
         shifted by the offset measured there (``g + max(0, g_check - g)``, summed over
         at most ``check_continuations`` continuations), and each new answer is checked
-        again.  The result's ``check`` says both verdicts (:func:`check_summary`).
-    check_gtol, check_continuations : float, int
+        again.  With ``check_continue_by`` 'tighter_model' the run continues instead on
+        ``check_model`` itself, from the answer (the check's run is its first
+        evaluation; the objective scenario's runs go to ``check_model`` from then on,
+        with Dynamic-Q's noise levels ``check_noise``), and reports that model's
+        answer.  The result's ``check`` says both verdicts (:func:`check_summary`).
+    check_gtol, check_continuations, check_continue_by : float, int, str
         See ``check_model`` (config/vehicle.yaml ``integration.check``).
+    check_noise : (float, float), optional
+        Noise levels (f, g) of ``check_model`` for a run continued on it
+        (``DynamicQOptions.noise_f``, ``noise_g``); None keeps the run's.
 
     Returns
     -------
@@ -488,6 +498,9 @@ def optimise(request: TuningRequest, full_model: FullModel,
     """
     if request.gradient_source == 'simplified' and simplified_gradient is None:
         raise ValueError("gradient source 'simplified' needs a simplified_gradient")
+    if check_continue_by not in CONTINUE_BY:
+        raise ValueError(f'check_continue_by must be one of {", ".join(CONTINUE_BY)}, '
+                         f'got {check_continue_by!r}')
     counter = counter or RunCounter()
     terms = _ConstraintTerms(request, full_model, simplified_gradient, constraint_models,
                              constraint_gradients, counter)
@@ -534,7 +547,7 @@ def optimise(request: TuningRequest, full_model: FullModel,
         result, check = _check_and_continue(
             result, request, terms, evaluated, correct, correction_options, corrections,
             callback, counter, lower, upper, options, staircase, check_model, check_gtol,
-            check_continuations)
+            check_continuations, check_continue_by, check_noise)
     correction = corrections[0]
     return _finish(result, request, terms, counter, correction, check)
 
@@ -664,18 +677,25 @@ def _check_and_continue(result: OptimizeResult, request: TuningRequest,
                         callback: Callable[[dict[str, Any], RunCounter], bool | None] | None,
                         counter: RunCounter, lower: Array, upper: Array,
                         options: Mapping[str, Any], staircase: Callable[[int], list[bool]],
-                        check_model: FullModel, check_gtol: float, continuations: int
+                        check_model: FullModel, check_gtol: float, continuations: int,
+                        continue_by: str = 'shift',
+                        check_noise: tuple[float, float] | None = None
                         ) -> tuple[OptimizeResult, dict[str, Any]]:
-    """Check the reported design at the tighter tolerance; continue shifted if needed.
+    """Check the reported design at the tighter tolerance; continue if needed.
 
     The check's verdict is feasible when its max g <= ``check_gtol``.  When it is not
-    while the run's model found the design feasible, Dynamic-Q goes on from it with
-    the eq. 11 constraints shifted by the offset measured there (accumulated over at
-    most ``continuations`` continuations), and the new answer is checked again.
+    while the run's model found the design feasible, Dynamic-Q goes on from it:
+    ``continue_by`` 'shift', on the run's model with the eq. 11 constraints shifted by
+    the offset measured there (accumulated over at most ``continuations``
+    continuations), the new answer checked again; 'tighter_model', once, on the check
+    model itself (:func:`_continue_on_check_model`).
     """
+    last_run: list[FullEvaluation] = []
+
     def checked(x: Array) -> tuple[float, Array]:
         run = check_model(np.asarray(x, float)[None, :])
         counter.full_runs += 1
+        last_run[:] = [run]
         return float(run.f[0]), np.asarray(run.g[0], float)
 
     x_best = np.asarray(result.x_best, float)
@@ -685,9 +705,15 @@ def _check_and_continue(result: OptimizeResult, request: TuningRequest,
     f_c, g_c = checked(x_best)
     check = check_summary(np.asarray(result.g_best, float)[:len(g_c)], g_c, f_c, check_gtol)
     check.update(continued=False, continuations=0, first=dict(check),
-                 x_checked=x_best.tolist(), check_gtol=check_gtol)
+                 x_checked=x_best.tolist(), check_gtol=check_gtol, continue_by=continue_by)
+    if (continue_by == 'tighter_model' and not check['feasible_check']
+            and check['feasible_run'] and continuations > 0):
+        return _continue_on_check_model(
+            result, request, terms, evaluated, correct, correction_options, corrections,
+            callback, counter, lower, upper, options, staircase, check_model, check,
+            last_run[0], check_noise)
     shift = np.zeros(k)
-    while (not check['feasible_check'] and check['feasible_run']
+    while (continue_by == 'shift' and not check['feasible_check'] and check['feasible_run']
            and check['continuations'] < continuations):
         # An engineer's correction of the same kind as the secant one: the constraints
         # shifted up by the offset the check measured at the answer.
@@ -719,6 +745,64 @@ def _check_and_continue(result: OptimizeResult, request: TuningRequest,
         check.update(check_summary(np.asarray(result.g_best, float)[:len(g_c)], g_c, f_c,
                                    check_gtol), x_checked=x_best.tolist())
     return result, check
+
+
+def _continue_on_check_model(result: OptimizeResult, request: TuningRequest,
+                             terms: _ConstraintTerms, evaluated: dict[bytes, Array],
+                             correct: bool, correction_options: CorrectionOptions,
+                             corrections: list[SecantCorrection | None],
+                             callback: Callable[[dict[str, Any], RunCounter],
+                                                bool | None] | None,
+                             counter: RunCounter, lower: Array, upper: Array,
+                             options: Mapping[str, Any],
+                             staircase: Callable[[int], list[bool]],
+                             check_model: FullModel, check: dict[str, Any],
+                             check_run: FullEvaluation,
+                             check_noise: tuple[float, float] | None
+                             ) -> tuple[OptimizeResult, dict[str, Any]]:
+    """Go on from the answer on the check model (``continue_by`` 'tighter_model').
+
+    The objective scenario's full runs go to ``check_model`` from here on: the values
+    of the run's model are forgotten (the continuation compares designs on one model),
+    the check's run of the answer is the continuation's first evaluation (no new run),
+    the secant correction goes on learning from the new model's runs, and Dynamic-Q
+    takes the check model's noise levels.  Extra constraints on other scenarios keep
+    their models and values.  The answer is that model's: its verdict is the check's.
+    """
+    x_best = np.asarray(result.x_best, float)
+    key = x_best.tobytes()
+    own = terms.values.get(key)
+    terms.models[request.scenario] = check_model
+    terms.values.clear()
+    terms._inputs_at.clear()
+    evaluated.clear()
+    g_check = np.asarray(check_run.g[0], float)
+    extra = (np.asarray(own[1], float)[len(g_check):] if own is not None
+             else np.asarray(result.g_best, float)[len(g_check):])
+    f_c, g_c = float(check_run.f[0]), np.r_[g_check, extra]
+    terms.values[key] = (f_c, g_c)
+    terms._inputs_at[key] = {**terms.inputs, request.scenario: check_run.inputs}
+    if check_run.metrics is not None and len(check_run.metric_names):
+        terms.metrics[key] = {str(name): float(value) for name, value in
+                              zip(check_run.metric_names, np.asarray(check_run.metrics)[0])}
+    if correct:
+        evaluated[key] = np.r_[f_c, g_c]
+    if check_noise is not None:
+        options = {**options, 'noise_f': float(check_noise[0]),
+                   'noise_g': float(check_noise[1])}
+    first = len(result.history)
+    second, cancelled = _run_from_answer(result, request, terms, evaluated, correct,
+                                         correction_options, corrections, callback, counter,
+                                         lower, upper, options, staircase)
+    check.update(continued=True, continuations=1, first_iteration=first)
+    if 'x_best' in second:
+        g_best = np.asarray(second.g_best, float)[:len(g_check)]
+        check.update(f_check=float(second.f_best), x_checked=np.asarray(
+            second.x_best, float).tolist(),
+            max_violation_check=float(max(0.0, np.max(g_best))) if g_best.size else 0.0,
+            feasible_check=bool(g_best.size == 0 or np.max(g_best) <= check['check_gtol']),
+            offset=[])
+    return second, check
 
 
 def _finish(result: OptimizeResult, request: TuningRequest, terms: _ConstraintTerms,

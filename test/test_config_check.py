@@ -103,6 +103,14 @@ def test_a_missing_key_or_a_number_as_text_in_the_vehicle_is_named(config_copy):
                             "a number, could not convert string to float: 'about 0.95'")
 
 
+def test_an_unknown_continuation_of_the_answer_check_is_named(config_copy):
+    _edit(config_copy, 'vehicle.yaml', 'continue_by: tighter_model', 'continue_by: model')
+    with pytest.raises(ConfigError) as raised:
+        check_config()
+    assert str(raised.value) == ("config/vehicle.yaml: integration.check.continue_by must "
+                                 "be one of shift, tighter_model, got 'model'")
+
+
 @pytest.mark.ros
 def test_graph_with_a_bad_config_file_does_not_start_one_line_exit_2(config_copy):
     _edit(config_copy, 'design_space.yaml', SPRING_FRONT,

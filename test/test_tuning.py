@@ -246,6 +246,44 @@ def test_an_answer_the_tighter_check_finds_infeasible_is_continued_with_shifted_
     assert [r['iteration'] for r in checked.history] == list(range(len(checked.history)))
 
 
+def test_an_answer_the_tighter_check_finds_infeasible_is_continued_on_the_check_model():
+    # The same 0.05 bias as above; continued on the check model itself, the run reaches
+    # that model's optimum (0.175, 0.575), f = 0.03125 (hand calculation), and reports
+    # its values there: g = 0 (active), not the run model's -0.05.
+    calls = []
+
+    def check_model(points):
+        calls.append(len(np.atleast_2d(points)))
+        run = quadratic_model(points)
+        return FullEvaluation(f=run.f, g=run.g + 0.05, inputs=run.inputs)
+
+    request = TuningRequest('ride', 2, gradient_source='simplified', options=OPTIONS)
+    plain = optimise(request, quadratic_model, analytic_gradient)
+    checked = optimise(request, quadratic_model, analytic_gradient, check_model=check_model,
+                       check_gtol=1e-6, check_continue_by='tighter_model')
+    check = checked.check
+    assert check['continue_by'] == 'tighter_model'
+    assert not check['first']['feasible_check'] and check['first']['feasible_run']
+    assert check['continued'] and check['continuations'] == 1
+    assert check['first_iteration'] == len(plain.history)
+    np.testing.assert_allclose(checked.x_best, [0.175, 0.575], atol=1e-4)
+    assert checked.f_best == pytest.approx(0.03125, rel=1e-3)
+    assert checked.g_best[0] == pytest.approx(0.0, abs=1e-4)
+    assert check['feasible_check'] and check['f_check'] == checked.f_best
+    # paid: the first run's, the check's one run, then every continuation evaluation on
+    # the check model but its start (the check's run of the first answer); no re-check
+    assert checked.n_full_runs == plain.n_full_runs + sum(calls)
+    assert sum(calls) == checked.nfev
+    assert [r['iteration'] for r in checked.history] == list(range(len(checked.history)))
+
+
+def test_an_unknown_continuation_of_the_check_is_refused():
+    request = TuningRequest('ride', 2, gradient_source='simplified', options=OPTIONS)
+    with pytest.raises(ValueError, match='check_continue_by must be one of'):
+        optimise(request, quadratic_model, analytic_gradient, check_model=quadratic_model,
+                 check_continue_by='tighter')
+
+
 def test_an_answer_the_check_confirms_is_not_continued():
     request = TuningRequest('ride', 2, gradient_source='simplified', options=OPTIONS)
     plain = optimise(request, quadratic_model, analytic_gradient)

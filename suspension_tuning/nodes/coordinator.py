@@ -226,7 +226,13 @@ def check_note(check: dict[str, Any]) -> str:
             f"at the tighter tolerance: max g {first['max_violation_check']:.4g} "
             f"({'feasible' if first['feasible_check'] else 'infeasible'}, "
             f"tolerance {check.get('check_gtol', math.nan):.3g})")
-    if check.get('continued'):
+    if check.get('continued') and check.get('continue_by') == 'tighter_model':
+        text += (f"; continued on the tighter-tolerance model: the answer's max g there "
+                 f"{check['max_violation_check']:.4g} "
+                 f"({'feasible' if check['feasible_check'] else 'infeasible'})")
+        if not check['feasible_check']:
+            text += '; no design feasible at the tighter tolerance was found'
+    elif check.get('continued'):
         shift = ', '.join(f'{v:.4g}' for v in check.get('shift', []))
         text += (f"; continued {check['continuations']} time(s) with the tyre-hop "
                  f"constraints shifted by [{shift}]: the answer's max g at the tighter "
@@ -816,13 +822,19 @@ class CoordinatorNode(Node):
         tolerance would go through FMI's setupExperiment, which the workers do not
         take per goal).  Returns (arguments, note).
         """  # noqa: D205
+        from suspension_tuning import simplified_inputs
         from suspension_tuning.answer_check import check_options
         from suspension_tuning.model_identity import builtin_fingerprint
         from suspension_tuning.vehicle.params import integrator_name
+        from suspension_tuning.vehicle.simplified import SimplifiedInputs
+
+        def packed(result: Any) -> TimeHistories:  # as the simulation node returns them
+            return simplified_inputs.pack(SimplifiedInputs.from_scenario_result(result, 0),
+                                          TimeHistories())
 
         none = {'check_model': None, 'check_gtol': 5e-3, 'check_continuations': 0}
         try:
-            options = check_options(request.scenario, request.n_vars)
+            options = check_options(request.scenario, request.n_vars, inputs=packed)
         except (ValueError, KeyError, OSError) as error:
             return none, f'not checked: {error}'
         if request.road:

@@ -374,7 +374,9 @@ def run_dynamic_q(
         ``optimise``'s ``check_model``; paid full runs, in ``n_full_runs``); the
         verdicts go to ``details['check']``.  When the check continued the run with
         shifted constraints, the history's earlier records carry the shift in their
-        ``max_violation`` too, so the run reports the continuation's answer.
+        ``max_violation`` too, so the run reports the continuation's answer; when it
+        continued on the check model, their ``max_violation`` is inf (the check
+        overruled their model's feasibility).
     """
     # the built-in model's noise levels (config/optimiser.yaml noise_levels) unless set
     options = with_noise_levels(vehicle_options() if options is None else options,
@@ -406,7 +408,13 @@ def run_dynamic_q(
         **checking,
     )
     verdict = result.get('check')
-    if verdict and verdict.get('continued'):
+    if verdict and verdict.get('continued') and verdict.get('continue_by') == 'tighter_model':
+        # the run's model's feasibility before the continuation was overruled by the
+        # check: those records are no longer candidates for the reported design
+        for entry in history:
+            if entry['iteration'] < verdict['first_iteration']:
+                entry['max_violation'] = math.inf
+    elif verdict and verdict.get('continued'):
         shift = np.asarray(verdict['shift'], float)
         for entry in history:
             if entry['iteration'] < verdict['first_iteration'] and entry['g']:

@@ -661,7 +661,10 @@ def run_starts(method: str, scenario: str, n_vars: int, reference: Reference,
         if verdict:
             r.check_f = float(verdict['f_check'])
             r.check_max_violation = float(verdict['max_violation_check'])
-            r.check_runs = 2 if verdict.get('continued') else 1
+            # one check, and one more after each shifted continuation (a continuation on
+            # the check model is its own check: its runs are the optimiser's)
+            r.check_runs = 1 + (int(verdict.get('continuations', 0))
+                                if verdict.get('continue_by', 'shift') == 'shift' else 0)
         r.paid_full_runs = paid_full_runs(r, own_stop=method not in NO_OWN_STOP)
         out.append(r)
         if log is not None:
