@@ -32,7 +32,10 @@ with ``--noisy``, on the noisy variable-step one:
 Definitions are bench_method.py's (``suspension_tuning.studies.method_benchmark``):
 solved = gap <= 1 % to the reference on the fixed-step model and max g <= 0.005; full
 runs to solve exclude the calibration; ``ride8_paid_full_runs`` adds it (what a user
-pays on a first run).  ``full_runs_ratio_vs_best_peer_ride8``: the best peer's median
+pays on a first run that stops at its solved design); ``ride8_paid_full_runs_to_stop``
+counts as bench_method.py does: every full run until ours stops by itself (the check
+and any continuation included) plus the calibration, per start solved at the check,
+else inf.  ``full_runs_ratio_vs_best_peer_ride8``: the best peer's median
 full runs to solve over ours; ``..._paid``: over ours plus the calibration.
 
 ``ratio_by_n``: the same ratio against COBYLA (and the other peers run) for the ride
@@ -206,6 +209,10 @@ def print_case(scenario: str, out: dict, suffix: str) -> None:
     print(f'{case}_median_full_runs{suffix}: {runs(ours)}')
     print(f'{case}_calibration_runs{suffix}: {out["calibration_runs"]}')
     print(f'{case}_paid_full_runs{suffix}: {runs(ours + out["calibration_runs"])}')
+    to_stop = [r.full_runs + out['calibration_runs'] if r.solved_checked else math.inf
+               for r in out['results']['dq_simplified']]
+    print(f'{case}_paid_full_runs_to_stop{suffix}: {runs(float(np.median(to_stop)))} '
+          f'(per start {", ".join(runs(v) for v in to_stop)})')
     for peer, median in p['peer_medians'].items():
         m = out['summaries'][peer]
         print(f'peer_median_full_runs_{peer}_{case}{suffix}: {runs(median)} '
