@@ -825,7 +825,7 @@ class CoordinatorNode(Node):
         from suspension_tuning import simplified_inputs
         from suspension_tuning.answer_check import check_options
         from suspension_tuning.model_identity import builtin_fingerprint
-        from suspension_tuning.vehicle.params import integrator_name
+        from suspension_tuning.vehicle.params import INTEGRATORS
         from suspension_tuning.vehicle.simplified import SimplifiedInputs
 
         def packed(result: Any) -> TimeHistories:  # as the simulation node returns them
@@ -839,7 +839,9 @@ class CoordinatorNode(Node):
             return none, f'not checked: {error}'
         if request.road:
             return none, 'not checked: a goal road (the check runs the configured road)'
-        if fingerprint != builtin_fingerprint(integrator_name(request.integrator or None)):
+        # the workers' fingerprint is that of their default integrator; a goal may ask
+        # for either (EvaluateDesign.integrator), so the built-in model is any of them
+        if fingerprint not in {builtin_fingerprint(name) for name in INTEGRATORS}:
             return none, ("not checked: the workers' model is not the built-in one (an FMU "
                           "is checked only where its setupExperiment tolerance can be set, "
                           "which the workers do not do per goal)")
