@@ -30,11 +30,6 @@ from suspension_tuning.paths import config_dir, read_yaml
 #: The check model's key in config/optimiser.yaml ``noise_levels`` (per scenario).
 CHECK_INTEGRATOR = 'check'
 
-#: How a run continues when the check finds its answer infeasible: 'shift' (on the run's
-#: model, the eq. 11 constraints shifted by the offset the check measured) or
-#: 'tighter_model' (on the check's model itself, from the answer).
-CONTINUE_BY = ('shift', 'tighter_model')
-
 
 @dataclass(frozen=True)
 class CheckSettings:
@@ -42,7 +37,8 @@ class CheckSettings:
 
     ``rtol``, ``atol``: DOPRI5's error tolerances; ``gtol``: the check's feasibility
     tolerance on g; ``continuations``: shifted continuations at most; ``continue_by``:
-    how a run whose answer the check finds infeasible goes on (:data:`CONTINUE_BY`).
+    how a run whose answer the check finds infeasible goes on
+    (:data:`suspension_tuning.tuning.CONTINUE_BY`).
     """
 
     rtol: float
@@ -53,6 +49,8 @@ class CheckSettings:
 
     def __post_init__(self) -> None:
         """Positive, finite tolerances, a known continuation (ValueError naming the key)."""
+        from suspension_tuning.tuning import CONTINUE_BY
+
         for name in ('rtol', 'atol'):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0.0):

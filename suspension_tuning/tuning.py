@@ -40,7 +40,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import OptimizeResult
 
-from suspension_tuning.answer_check import CONTINUE_BY
 from suspension_tuning.optim.correction import CorrectionOptions, SecantCorrection
 from suspension_tuning.optim.dynamic_q import DynamicQ, DynamicQOptions
 from suspension_tuning.optim.finite_diff import central_difference
@@ -109,6 +108,13 @@ class FullEvaluation:
     metric_names: Sequence[str] = ()
     metrics: Array | None = None
 
+
+#: How a run continues when the check at a tighter tolerance finds its answer
+#: infeasible (:func:`optimise`'s ``check_continue_by``; config/vehicle.yaml
+#: ``integration.check.continue_by``): 'shift' (on the run's model, the eq. 11
+#: constraints shifted by the offset the check measured) or 'tighter_model' (on the
+#: check's model itself, from the answer).
+CONTINUE_BY = ('shift', 'tighter_model')
 
 #: Full model on a batch: designs (m, n) -> FullEvaluation.
 FullModel = Callable[[Array], FullEvaluation]
