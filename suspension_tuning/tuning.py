@@ -771,8 +771,9 @@ def _continue_on_check_model(result: OptimizeResult, request: TuningRequest,
     The objective scenario's full runs go to ``check_model`` from here on: the values
     of the run's model are forgotten (the continuation compares designs on one model),
     the check's run of the answer is the continuation's first evaluation (no new run),
-    the secant correction goes on learning from the new model's runs, and Dynamic-Q
-    takes the check model's noise levels.  Extra constraints on other scenarios keep
+    the secant correction starts afresh at the answer (what it learnt was the
+    discrepancy to the other model, noise included), and Dynamic-Q takes the check
+    model's noise levels.  Extra constraints on other scenarios keep
     their models and values.  The answer is that model's: its verdict is the check's.
     """
     x_best = np.asarray(result.x_best, float)
@@ -793,6 +794,7 @@ def _continue_on_check_model(result: OptimizeResult, request: TuningRequest,
                               zip(check_run.metric_names, np.asarray(check_run.metrics)[0])}
     if correct:
         evaluated[key] = np.r_[f_c, g_c]
+        corrections[0] = None
     if check_noise is not None:
         options = {**options, 'noise_f': float(check_noise[0]),
                    'noise_g': float(check_noise[1])}
