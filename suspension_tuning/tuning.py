@@ -802,6 +802,17 @@ def _continue_on_check_model(result: OptimizeResult, request: TuningRequest,
     second, cancelled = _run_from_answer(result, request, terms, evaluated, correct,
                                          correction_options, corrections, callback, counter,
                                          lower, upper, options, staircase)
+    restarts = 0
+    while (corrections[0] is not None and not cancelled
+           and restarts < correction_options.restarts
+           and second.get('stop_test') == 'maxiter' and 'x_best' in second):
+        # as the run itself does: at the iteration limit, once more from the answer
+        corrections[0] = None
+        second, cancelled = _run_from_answer(second, request, terms, evaluated, correct,
+                                             correction_options, corrections, callback,
+                                             counter, lower, upper, options, staircase)
+        restarts += 1
+    _note_restarts(second, int(result.get('restarts', 0)) + restarts)
     check.update(continued=True, continuations=1, first_iteration=first)
     if 'x_best' in second:
         g_best = np.asarray(second.g_best, float)[:len(g_check)]
