@@ -277,6 +277,33 @@ def test_an_answer_the_tighter_check_finds_infeasible_is_continued_on_the_check_
     assert [r['iteration'] for r in checked.history] == list(range(len(checked.history)))
 
 
+def test_a_continuation_on_the_check_model_at_the_iteration_limit_restarts_once():
+    # With the simplified values given, the secant correction is on, and a corrected run
+    # that reaches the iteration limit starts once more from its answer (restarts: 1,
+    # config/optimiser.yaml): the first run and its continuation on the check model each
+    # do, 2 iterations a run, and end at the check model's optimum (0.175, 0.575), f =
+    # 0.03125 (hand calculation, as above).
+    def gradient_with_values(x, inputs):
+        df, dg = analytic_gradient(x, inputs)
+        run = quadratic_model(x[None, :])
+        return df, dg, np.r_[run.f, run.g[0]]
+
+    def check_model(points):
+        run = quadratic_model(points)
+        return FullEvaluation(f=run.f, g=run.g + 0.05, inputs=run.inputs)
+
+    request = TuningRequest('ride', 2, gradient_source='simplified',
+                            options=OPTIONS | {'maxiter': 2})
+    result = optimise(request, quadratic_model, gradient_with_values,
+                      check_model=check_model, check_gtol=1e-6,
+                      check_continue_by='tighter_model')
+    assert result.check['continued'] and result.restarts == 2
+    assert 'restarted 2 time(s)' in result.message
+    np.testing.assert_allclose(result.x_best, [0.175, 0.575], atol=1e-4)
+    assert result.f_best == pytest.approx(0.03125, rel=1e-3)
+    assert [r['iteration'] for r in result.history] == list(range(len(result.history)))
+
+
 def test_an_unknown_continuation_of_the_check_is_refused():
     request = TuningRequest('ride', 2, gradient_source='simplified', options=OPTIONS)
     with pytest.raises(ValueError, match='check_continue_by must be one of'):
