@@ -534,19 +534,9 @@ def optimise(request: TuningRequest, full_model: FullModel,
                    surrogate_rule_constraints=staircase)
     cancelled = _drive(opt, request, terms, evaluated, correct, correction_options,
                        corrections, callback, counter, lower, upper, 0)
-    result = opt.result()
-    restarts = 0
-    while (corrections[0] is not None and not cancelled
-           and restarts < correction_options.restarts
-           and result.get('stop_test') == 'maxiter' and 'x_best' in result):
-        # A run whose correction learnt from its full runs (the simplified models gave
-        # values) starts again: the correction afresh at the answer (a blind variable's
-        # column seeded there again), Dynamic-Q with its first move limit.
-        corrections[0] = None
-        result, cancelled = _run_from_answer(result, request, terms, evaluated, correct,
-                                             correction_options, corrections, callback,
-                                             counter, lower, upper, options, staircase)
-        restarts += 1
+    result, cancelled, restarts = _restart_at_limit(
+        opt.result(), cancelled, request, terms, evaluated, correct, correction_options,
+        corrections, callback, counter, lower, upper, options, staircase)
     _note_restarts(result, restarts)
     check: dict[str, Any] | None = None
     if check_model is not None and not cancelled and 'x_best' in result:
@@ -620,6 +610,33 @@ def _drive(opt: DynamicQ, request: TuningRequest, terms: _ConstraintTerms,
             opt.stop('cancelled')
             cancelled = True
     return cancelled
+
+
+def _restart_at_limit(result: OptimizeResult, cancelled: bool, request: TuningRequest,
+                      terms: _ConstraintTerms, evaluated: dict[bytes, Array], correct: bool,
+                      correction_options: CorrectionOptions,
+                      corrections: list[SecantCorrection | None],
+                      callback: Callable[[dict[str, Any], RunCounter], bool | None] | None,
+                      counter: RunCounter, lower: Array, upper: Array,
+                      options: Mapping[str, Any], staircase: Callable[[int], list[bool]]
+                      ) -> tuple[OptimizeResult, bool, int]:
+    """Start a corrected run that ended at the iteration limit again from its answer.
+
+    A run whose correction learnt from its full runs (the simplified models gave values)
+    starts again, at most ``correction_options.restarts`` times: the correction afresh
+    at the answer (a blind variable's column seeded there again), Dynamic-Q with its
+    first move limit.  Returns (result, cancelled, restarts).
+    """
+    restarts = 0
+    while (corrections[0] is not None and not cancelled
+           and restarts < correction_options.restarts
+           and result.get('stop_test') == 'maxiter' and 'x_best' in result):
+        corrections[0] = None
+        result, cancelled = _run_from_answer(result, request, terms, evaluated, correct,
+                                             correction_options, corrections, callback,
+                                             counter, lower, upper, options, staircase)
+        restarts += 1
+    return result, cancelled, restarts
 
 
 def _note_restarts(result: OptimizeResult, restarts: int) -> None:
@@ -802,16 +819,10 @@ def _continue_on_check_model(result: OptimizeResult, request: TuningRequest,
     second, cancelled = _run_from_answer(result, request, terms, evaluated, correct,
                                          correction_options, corrections, callback, counter,
                                          lower, upper, options, staircase)
-    restarts = 0
-    while (corrections[0] is not None and not cancelled
-           and restarts < correction_options.restarts
-           and second.get('stop_test') == 'maxiter' and 'x_best' in second):
-        # as the run itself does: at the iteration limit, once more from the answer
-        corrections[0] = None
-        second, cancelled = _run_from_answer(second, request, terms, evaluated, correct,
-                                             correction_options, corrections, callback,
-                                             counter, lower, upper, options, staircase)
-        restarts += 1
+    # as the run itself does: at the iteration limit, once more from the answer
+    second, cancelled, restarts = _restart_at_limit(
+        second, cancelled, request, terms, evaluated, correct, correction_options,
+        corrections, callback, counter, lower, upper, options, staircase)
     _note_restarts(second, int(result.get('restarts', 0)) + restarts)
     check.update(continued=True, continuations=1, first_iteration=first)
     if 'x_best' in second:
