@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -529,36 +529,56 @@ def optimise(request: TuningRequest, full_model: FullModel,
     # the correction compares them with the simplified values at the same design.
     evaluated = {np.asarray(r['x'], float).tobytes(): np.r_[float(r['f']), np.asarray(
         r['g'], float)] for r in (history or ()) if correct}
+    run = _Run(request, terms, evaluated, correct, correction_options, corrections,
+               callback, counter, lower, upper, options, staircase)
     opt = DynamicQ(request.start, lower, upper, options, history=history,
                    gradient_source=request.gradient_source,
                    surrogate_rule_constraints=staircase)
-    cancelled = _drive(opt, request, terms, evaluated, correct, correction_options,
-                       corrections, callback, counter, lower, upper, 0)
-    result, cancelled, restarts = _restart_at_limit(
-        opt.result(), cancelled, request, terms, evaluated, correct, correction_options,
-        corrections, callback, counter, lower, upper, options, staircase)
+    cancelled = _drive(opt, run, 0)
+    result, cancelled, restarts = _restart_at_limit(opt.result(), cancelled, run)
     _note_restarts(result, restarts)
     check: dict[str, Any] | None = None
     if check_model is not None and not cancelled and 'x_best' in result:
-        result, check = _check_and_continue(
-            result, request, terms, evaluated, correct, correction_options, corrections,
-            callback, counter, lower, upper, options, staircase, check_model, check_gtol,
-            check_continuations, check_continue_by, check_noise)
+        result, check = _check_and_continue(result, run, check_model, check_gtol,
+                                            check_continuations, check_continue_by,
+                                            check_noise)
     correction = corrections[0]
     return _finish(result, request, terms, counter, correction, check)
 
 
-def _drive(opt: DynamicQ, request: TuningRequest, terms: _ConstraintTerms,
-           evaluated: dict[bytes, Array], correct: bool,
-           correction_options: CorrectionOptions,
-           corrections: list[SecantCorrection | None],
-           callback: Callable[[dict[str, Any], RunCounter], bool | None] | None,
-           counter: RunCounter, lower: Array, upper: Array, first_iteration: int) -> bool:
+@dataclass
+class _Run:
+    """What :func:`optimise`'s loop and its restarts and continuations share.
+
+    ``evaluated``: full-model values (f, then g) at every evaluated design, which the
+    correction compares with the simplified values; ``corrections``: the one slot of
+    the secant correction (None until the first gradient, and after a restart);
+    ``options``: Dynamic-Q's; ``staircase``: which of m constraints are eq. 11 counts.
+    """
+
+    request: TuningRequest
+    terms: _ConstraintTerms
+    evaluated: dict[bytes, Array]
+    correct: bool
+    correction_options: CorrectionOptions
+    corrections: list[SecantCorrection | None]
+    callback: Callable[[dict[str, Any], RunCounter], bool | None] | None
+    counter: RunCounter
+    lower: Array
+    upper: Array
+    options: Mapping[str, Any]
+    staircase: Callable[[int], list[bool]]
+
+
+def _drive(opt: DynamicQ, run: _Run, first_iteration: int) -> bool:
     """Answer Dynamic-Q's requests until it stops; True when cancelled.
 
     Records go to ``callback`` with their iteration numbers after ``first_iteration``
     (a continuation after the check numbers on).
     """
+    request, terms, evaluated, correct = run.request, run.terms, run.evaluated, run.correct
+    correction_options, corrections = run.correction_options, run.corrections
+    callback, counter, lower, upper = run.callback, run.counter, run.lower, run.upper
     n = request.n_vars
     cancelled = False
     verified: dict[tuple[int, int], tuple[Array, float, Array, Array]] = {}
@@ -612,13 +632,7 @@ def _drive(opt: DynamicQ, request: TuningRequest, terms: _ConstraintTerms,
     return cancelled
 
 
-def _restart_at_limit(result: OptimizeResult, cancelled: bool, request: TuningRequest,
-                      terms: _ConstraintTerms, evaluated: dict[bytes, Array], correct: bool,
-                      correction_options: CorrectionOptions,
-                      corrections: list[SecantCorrection | None],
-                      callback: Callable[[dict[str, Any], RunCounter], bool | None] | None,
-                      counter: RunCounter, lower: Array, upper: Array,
-                      options: Mapping[str, Any], staircase: Callable[[int], list[bool]]
+def _restart_at_limit(result: OptimizeResult, cancelled: bool, run: _Run
                       ) -> tuple[OptimizeResult, bool, int]:
     """Start a corrected run that ended at the iteration limit again from its answer.
 
@@ -628,13 +642,11 @@ def _restart_at_limit(result: OptimizeResult, cancelled: bool, request: TuningRe
     first move limit.  Returns (result, cancelled, restarts).
     """
     restarts = 0
-    while (corrections[0] is not None and not cancelled
-           and restarts < correction_options.restarts
+    while (run.corrections[0] is not None and not cancelled
+           and restarts < run.correction_options.restarts
            and result.get('stop_test') == 'maxiter' and 'x_best' in result):
-        corrections[0] = None
-        result, cancelled = _run_from_answer(result, request, terms, evaluated, correct,
-                                             correction_options, corrections, callback,
-                                             counter, lower, upper, options, staircase)
+        run.corrections[0] = None
+        result, cancelled = _run_from_answer(result, run)
         restarts += 1
     return result, cancelled, restarts
 
@@ -647,25 +659,17 @@ def _note_restarts(result: OptimizeResult, restarts: int) -> None:
                              'its answer at the iteration limit)')
 
 
-def _run_from_answer(result: OptimizeResult, request: TuningRequest,
-                     terms: _ConstraintTerms, evaluated: dict[bytes, Array], correct: bool,
-                     correction_options: CorrectionOptions,
-                     corrections: list[SecantCorrection | None],
-                     callback: Callable[[dict[str, Any], RunCounter], bool | None] | None,
-                     counter: RunCounter, lower: Array, upper: Array,
-                     options: Mapping[str, Any], staircase: Callable[[int], list[bool]]
-                     ) -> tuple[OptimizeResult, bool]:
+def _run_from_answer(result: OptimizeResult, run: _Run) -> tuple[OptimizeResult, bool]:
     """A new Dynamic-Q run from ``result``'s answer, numbered on after its history.
 
     The answer's values come from the cache (no full run); the new run's result
     carries both histories and iteration counts.  Returns (result, cancelled).
     """
     first = len(result.history)
-    opt = DynamicQ(np.asarray(result.x_best, float), lower, upper, options,
-                   gradient_source=request.gradient_source,
-                   surrogate_rule_constraints=staircase)
-    cancelled = _drive(opt, request, terms, evaluated, correct, correction_options,
-                       corrections, callback, counter, lower, upper, first)
+    opt = DynamicQ(np.asarray(result.x_best, float), run.lower, run.upper, run.options,
+                   gradient_source=run.request.gradient_source,
+                   surrogate_rule_constraints=run.staircase)
+    cancelled = _drive(opt, run, first)
     second = opt.result()
     for rec in second.history:
         if int(rec['iteration']) < first:
@@ -693,13 +697,7 @@ def check_summary(g_run: ArrayLike, g_check: ArrayLike, f_check: float, gtol: fl
             'max_violation_check': viol, 'offset': (g_check - g_run[:g_check.size]).tolist()}
 
 
-def _check_and_continue(result: OptimizeResult, request: TuningRequest,
-                        terms: _ConstraintTerms, evaluated: dict[bytes, Array],
-                        correct: bool, correction_options: CorrectionOptions,
-                        corrections: list[SecantCorrection | None],
-                        callback: Callable[[dict[str, Any], RunCounter], bool | None] | None,
-                        counter: RunCounter, lower: Array, upper: Array,
-                        options: Mapping[str, Any], staircase: Callable[[int], list[bool]],
+def _check_and_continue(result: OptimizeResult, run: _Run,
                         check_model: FullModel, check_gtol: float, continuations: int,
                         continue_by: str = 'shift',
                         check_noise: tuple[float, float] | None = None
@@ -713,13 +711,14 @@ def _check_and_continue(result: OptimizeResult, request: TuningRequest,
     continuations), the new answer checked again; 'tighter_model', once, on the check
     model itself (:func:`_continue_on_check_model`).
     """
+    terms, evaluated = run.terms, run.evaluated
     last_run: list[FullEvaluation] = []
 
     def checked(x: Array) -> tuple[float, Array]:
-        run = check_model(np.asarray(x, float)[None, :])
-        counter.full_runs += 1
-        last_run[:] = [run]
-        return float(run.f[0]), np.asarray(run.g[0], float)
+        evaluation = check_model(np.asarray(x, float)[None, :])
+        run.counter.full_runs += 1
+        last_run[:] = [evaluation]
+        return float(evaluation.f[0]), np.asarray(evaluation.g[0], float)
 
     x_best = np.asarray(result.x_best, float)
     # the g rows (eq. 11, then the extra constraints) as reported: no run of x_best,
@@ -731,10 +730,8 @@ def _check_and_continue(result: OptimizeResult, request: TuningRequest,
                  x_checked=x_best.tolist(), check_gtol=check_gtol, continue_by=continue_by)
     if (continue_by == 'tighter_model' and not check['feasible_check']
             and check['feasible_run'] and continuations > 0):
-        return _continue_on_check_model(
-            result, request, terms, evaluated, correct, correction_options, corrections,
-            callback, counter, lower, upper, options, staircase, check_model, check,
-            last_run[0], check_noise)
+        return _continue_on_check_model(result, run, check_model, check, last_run[0],
+                                        check_noise)
     shift = np.zeros(k)
     while (continue_by == 'shift' and not check['feasible_check'] and check['feasible_run']
            and check['continuations'] < continuations):
@@ -747,9 +744,7 @@ def _check_and_continue(result: OptimizeResult, request: TuningRequest,
             if full is not None:
                 evaluated[key] = np.r_[full[0], full[1] + shift]
         first = len(result.history)
-        second, cancelled = _run_from_answer(result, request, terms, evaluated, correct,
-                                             correction_options, corrections, callback,
-                                             counter, lower, upper, options, staircase)
+        second, cancelled = _run_from_answer(result, run)
         terms.shift = None
         # the answer's values as the model gave them (the shift was the run's)
         for name in ('g', 'g_best'):
@@ -770,68 +765,44 @@ def _check_and_continue(result: OptimizeResult, request: TuningRequest,
     return result, check
 
 
-def _continue_on_check_model(result: OptimizeResult, request: TuningRequest,
-                             terms: _ConstraintTerms, evaluated: dict[bytes, Array],
-                             correct: bool, correction_options: CorrectionOptions,
-                             corrections: list[SecantCorrection | None],
-                             callback: Callable[[dict[str, Any], RunCounter],
-                                                bool | None] | None,
-                             counter: RunCounter, lower: Array, upper: Array,
-                             options: Mapping[str, Any],
-                             staircase: Callable[[int], list[bool]],
-                             check_model: FullModel, check: dict[str, Any],
-                             check_run: FullEvaluation,
+def _continue_on_check_model(result: OptimizeResult, run: _Run, check_model: FullModel,
+                             check: dict[str, Any], check_run: FullEvaluation,
                              check_noise: tuple[float, float] | None
                              ) -> tuple[OptimizeResult, dict[str, Any]]:
     """Go on from the answer on the check model (``continue_by`` 'tighter_model').
 
-    The objective scenario's full runs go to ``check_model`` from here on: the values
-    of the run's model are forgotten (the continuation compares designs on one model),
-    the check's run of the answer is the continuation's first evaluation (no new run),
-    the secant correction starts afresh at the answer (what it learnt was the
-    discrepancy to the other model, noise included), and Dynamic-Q takes the check
-    model's noise levels.  Extra constraints on other scenarios keep
-    their models and values.  The answer is that model's: its verdict is the check's.
+    The objective scenario's full runs go to ``check_model`` from here on
+    (:meth:`_ConstraintTerms.continue_on`): the values of the run's model are forgotten
+    (the continuation compares designs on one model), the check's run of the answer is
+    the continuation's first evaluation (no new run), the secant correction starts
+    afresh at the answer (what it learnt was the discrepancy to the other model, noise
+    included), and Dynamic-Q takes the check model's noise levels.  Extra constraints
+    on other scenarios keep their models and values.  The answer is that model's: its
+    verdict is the check's.
     """
     x_best = np.asarray(result.x_best, float)
-    key = x_best.tobytes()
-    own = terms.values.get(key)
-    terms.models[request.scenario] = check_model
-    terms.values.clear()
-    terms._inputs_at.clear()
-    evaluated.clear()
-    g_check = np.asarray(check_run.g[0], float)
-    extra = (np.asarray(own[1], float)[len(g_check):] if own is not None
-             else np.asarray(result.g_best, float)[len(g_check):])
-    f_c, g_c = float(check_run.f[0]), np.r_[g_check, extra]
-    terms.values[key] = (f_c, g_c)
-    terms._inputs_at[key] = {**terms.inputs, request.scenario: check_run.inputs}
-    if check_run.metrics is not None and len(check_run.metric_names):
-        terms.metrics[key] = {str(name): float(value) for name, value in
-                              zip(check_run.metric_names, np.asarray(check_run.metrics)[0])}
-    if correct:
-        evaluated[key] = np.r_[f_c, g_c]
-        corrections[0] = None
+    f_c, g_c = run.terms.continue_on(check_model, x_best, check_run,
+                                     np.asarray(result.g_best, float))
+    run.evaluated.clear()
+    if run.correct:
+        run.evaluated[x_best.tobytes()] = np.r_[f_c, g_c]
+        run.corrections[0] = None
     if check_noise is not None:
-        options = {**options, 'noise_f': float(check_noise[0]),
-                   'noise_g': float(check_noise[1])}
+        run = replace(run, options={**run.options, 'noise_f': float(check_noise[0]),
+                                    'noise_g': float(check_noise[1])})
     first = len(result.history)
-    second, cancelled = _run_from_answer(result, request, terms, evaluated, correct,
-                                         correction_options, corrections, callback, counter,
-                                         lower, upper, options, staircase)
+    second, cancelled = _run_from_answer(result, run)
     # as the run itself does: at the iteration limit, once more from the answer
-    second, cancelled, restarts = _restart_at_limit(
-        second, cancelled, request, terms, evaluated, correct, correction_options,
-        corrections, callback, counter, lower, upper, options, staircase)
+    second, cancelled, restarts = _restart_at_limit(second, cancelled, run)
     _note_restarts(second, int(result.get('restarts', 0)) + restarts)
     check.update(continued=True, continuations=1, first_iteration=first)
     if 'x_best' in second:
-        g_best = np.asarray(second.g_best, float)[:len(g_check)]
-        check.update(f_check=float(second.f_best), x_checked=np.asarray(
-            second.x_best, float).tolist(),
-            max_violation_check=float(max(0.0, np.max(g_best))) if g_best.size else 0.0,
-            feasible_check=bool(g_best.size == 0 or np.max(g_best) <= check['check_gtol']),
-            offset=[])
+        # the answer's g is the check model's own: its verdict, on both sides
+        g_best = np.asarray(second.g_best, float)[:len(check_run.g[0])]
+        verdict = check_summary(g_best, g_best, float(second.f_best), check['check_gtol'])
+        check.update({name: verdict[name] for name in
+                      ('f_check', 'max_violation_check', 'feasible_check')},
+                     x_checked=np.asarray(second.x_best, float).tolist(), offset=[])
     return second, check
 
 
@@ -1054,12 +1025,37 @@ class _ConstraintTerms:
         for name, run in runs.items():
             self.inputs[name] = run.inputs
         primary = runs[self.request.scenario]
-        if primary.metrics is not None and len(primary.metric_names):
-            self.metrics[np.asarray(x, float).tobytes()] = {
-                str(name): float(value)
-                for name, value in zip(primary.metric_names, np.asarray(primary.metrics)[0])}
+        self._keep_metrics(x, primary)
         g = np.concatenate([np.asarray(primary.g[0], float), self._constraint_values(runs)[0]])
         return float(primary.f[0]), g
+
+    def _keep_metrics(self, x: Array, run: FullEvaluation) -> None:
+        """The named metrics of the objective scenario's run of x, when it gave any."""
+        if run.metrics is not None and len(run.metric_names):
+            self.metrics[np.asarray(x, float).tobytes()] = {
+                str(name): float(value)
+                for name, value in zip(run.metric_names, np.asarray(run.metrics)[0])}
+
+    def continue_on(self, model: FullModel, x: Array, run: FullEvaluation,
+                    g_reported: Array) -> tuple[float, Array]:
+        """Run the objective scenario on ``model`` from here on, ``run`` its run of x.
+
+        Every value of the old model is forgotten; x's are ``run``'s f and eq. 11 g,
+        then the extra constraints' as evaluated before (``g_reported`` when x was not
+        run here: a resumed answer).  Returns x's (f, g).
+        """
+        key = np.asarray(x, float).tobytes()
+        own = self.values.get(key)
+        k = np.asarray(run.g, float).shape[1]
+        extra = np.asarray(own[1] if own is not None else g_reported, float)[k:]
+        self.models[self.request.scenario] = model
+        self.values.clear()
+        self._inputs_at.clear()
+        f, g = float(run.f[0]), np.r_[np.asarray(run.g[0], float), extra]
+        self.values[key] = (f, g)
+        self._inputs_at[key] = {**self.inputs, self.request.scenario: run.inputs}
+        self._keep_metrics(x, run)
+        return f, g.copy()
 
     def stacked_values(self, points: Array) -> Array:
         """Columns f, g (eq. 11 then extra) of every point (full model, every scenario)."""
