@@ -38,7 +38,10 @@ class CheckSettings:
     ``rtol``, ``atol``: DOPRI5's error tolerances; ``gtol``: the check's feasibility
     tolerance on g; ``continuations``: shifted continuations at most; ``continue_by``:
     how a run whose answer the check finds infeasible goes on
-    (:data:`suspension_tuning.tuning.CONTINUE_BY`).
+    (:data:`suspension_tuning.tuning.CONTINUE_BY`); ``last_iterate_gap``: relative f
+    by which a run's answer may lie above its last iterate, infeasible on the run's
+    model, before the run goes on from that iterate on the check's model (0: never;
+    ``tuning.optimise``'s ``check_last_gap``).
     """
 
     rtol: float
@@ -46,6 +49,7 @@ class CheckSettings:
     gtol: float = 5e-3
     continuations: int = 2
     continue_by: str = 'shift'
+    last_iterate_gap: float = 0.0
 
     def __post_init__(self) -> None:
         """Positive, finite tolerances, a known continuation (ValueError naming the key)."""
@@ -56,6 +60,9 @@ class CheckSettings:
             if not (np.isfinite(value) and value > 0.0):
                 raise ValueError(f'integration.check.{name} must be positive and finite, '
                                  f'got {value}')
+        if not (np.isfinite(self.last_iterate_gap) and self.last_iterate_gap >= 0.0):
+            raise ValueError(f'integration.check.last_iterate_gap must be >= 0 and finite, '
+                             f'got {self.last_iterate_gap}')
         if self.continue_by not in CONTINUE_BY:
             raise ValueError(f'integration.check.continue_by must be one of '
                              f'{", ".join(CONTINUE_BY)}, got {self.continue_by!r}')
@@ -69,7 +76,8 @@ def load_check_settings(path: str | Path | None = None) -> CheckSettings:
         raise ValueError('config/vehicle.yaml has no integration.check (rtol, atol)')
     return CheckSettings(float(check['rtol']), float(check['atol']),
                          float(check.get('gtol', 5e-3)), int(check.get('continuations', 2)),
-                         str(check.get('continue_by', 'shift')))
+                         str(check.get('continue_by', 'shift')),
+                         float(check.get('last_iterate_gap', 0.0)))
 
 
 def check_design(scenario: str, n_vars: int, x: ArrayLike,
@@ -105,7 +113,7 @@ def check_options(scenario: str, n_vars: int, settings: CheckSettings | None = N
 
     ``check_model`` (designs (1, n) -> ``FullEvaluation`` at the tighter tolerance, with
     the named metrics and the simplified model's inputs), ``check_gtol``,
-    ``check_continuations``, ``check_continue_by`` (config/vehicle.yaml
+    ``check_continuations``, ``check_continue_by``, ``check_last_gap`` (config/vehicle.yaml
     ``integration.check``) and ``check_noise``, the check model's noise levels (f, g)
     (config/optimiser.yaml ``noise_levels``, integrator ``check``) for a run continued
     on it: what the coordinator passes for the built-in model, and an in-process run
@@ -130,6 +138,7 @@ def check_options(scenario: str, n_vars: int, settings: CheckSettings | None = N
     return {'check_model': model, 'check_gtol': settings.gtol,
             'check_continuations': settings.continuations,
             'check_continue_by': settings.continue_by,
+            'check_last_gap': settings.last_iterate_gap,
             'check_noise': noise_levels(scenario, CHECK_INTEGRATOR)}
 
 

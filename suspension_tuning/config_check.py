@@ -16,6 +16,7 @@ later reports the same line first (the coordinator checks again before each goal
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -49,6 +50,11 @@ def _run(check: Callable[[], object], default_file: str) -> None:
         KEY_TRACKER.reset(token)
 
 
+#: A dotted key path (``integration.check.gtol``) opening a loader's message: the
+#: loader named the key itself, which need not be the last key it read.
+_DOTTED_KEY = re.compile(r'[A-Za-z_]\w*(\.[A-Za-z_]\w*)+')
+
+
 def _message(error: Exception, tracker: KeyTracker, default_file: str) -> str:
     text = str(error.args[0]) if isinstance(error, KeyError) and error.args else str(error)
     first = text.split(':', 1)[0].strip()
@@ -61,8 +67,9 @@ def _message(error: Exception, tracker: KeyTracker, default_file: str) -> str:
         return f'{source}: missing key {key or text}'
     if 'convert' in text or 'must be a real number' in text or 'argument must be' in text:
         return f'{source}: {key}: expected a number, {text}'
-    if not key or text.startswith(key):  # the loader named the key already
-        return f'{source}: {text}'
+    word = text.split(' ', 1)[0]
+    if not key or text.startswith(key) or _DOTTED_KEY.fullmatch(word):
+        return f'{source}: {text}'  # the loader named the key already
     return f'{source}: {key}: {text}'
 
 

@@ -432,6 +432,7 @@ def optimise(request: TuningRequest, full_model: FullModel,
              check_continuations: int = 2,
              check_continue_by: str = 'shift',
              check_noise: tuple[float, float] | None = None,
+             check_last_gap: float = 0.0,
              ) -> OptimizeResult:
     """Run Dynamic-Q on the full model with the requested gradient source.
 
@@ -480,6 +481,13 @@ def optimise(request: TuningRequest, full_model: FullModel,
     check_noise : (float, float), optional
         Noise levels (f, g) of ``check_model`` for a run continued on it
         (``DynamicQOptions.noise_f``, ``noise_g``); None keeps the run's.
+    check_last_gap : float
+        With 'tighter_model': a run that a stop test ended at a last iterate infeasible
+        on its model, whose answer's f lies more than this fraction above that
+        iterate's, converged away from its answer; the last iterate is checked too
+        (one more paid run) and the run goes on from it on ``check_model``.  The
+        answer checked first stays the answer when the continuation finds nothing
+        better and feasible on ``check_model``.  0 (default): never.
 
     Returns
     -------
@@ -541,7 +549,7 @@ def optimise(request: TuningRequest, full_model: FullModel,
     if check_model is not None and not cancelled and 'x_best' in result:
         result, check = _check_and_continue(result, run, check_model, check_gtol,
                                             check_continuations, check_continue_by,
-                                            check_noise)
+                                            check_noise, check_last_gap)
     correction = corrections[0]
     return _finish(result, request, terms, counter, correction, check)
 
@@ -700,7 +708,8 @@ def check_summary(g_run: ArrayLike, g_check: ArrayLike, f_check: float, gtol: fl
 def _check_and_continue(result: OptimizeResult, run: _Run,
                         check_model: FullModel, check_gtol: float, continuations: int,
                         continue_by: str = 'shift',
-                        check_noise: tuple[float, float] | None = None
+                        check_noise: tuple[float, float] | None = None,
+                        last_gap: float = 0.0
                         ) -> tuple[OptimizeResult, dict[str, Any]]:
     """Check the reported design at the tighter tolerance; continue if needed.
 
@@ -709,7 +718,9 @@ def _check_and_continue(result: OptimizeResult, run: _Run,
     ``continue_by`` 'shift', on the run's model with the eq. 11 constraints shifted by
     the offset measured there (accumulated over at most ``continuations``
     continuations), the new answer checked again; 'tighter_model', once, on the check
-    model itself (:func:`_continue_on_check_model`).
+    model itself (:func:`_continue_on_check_model`), and from the last iterate instead
+    when the run converged away from its answer (:func:`_converged_elsewhere`,
+    ``last_gap``).
     """
     terms, evaluated = run.terms, run.evaluated
     last_run: list[FullEvaluation] = []
@@ -728,10 +739,15 @@ def _check_and_continue(result: OptimizeResult, run: _Run,
     check = check_summary(np.asarray(result.g_best, float)[:len(g_c)], g_c, f_c, check_gtol)
     check.update(continued=False, continuations=0, first=dict(check),
                  x_checked=x_best.tolist(), check_gtol=check_gtol, continue_by=continue_by)
-    if (continue_by == 'tighter_model' and not check['feasible_check']
-            and check['feasible_run'] and continuations > 0):
-        return _continue_on_check_model(result, run, check_model, check, last_run[0],
-                                        check_noise)
+    if continue_by == 'tighter_model' and continuations > 0:
+        if _converged_elsewhere(result, run, last_gap):
+            answer_run = last_run[0]
+            checked(result.x)
+            return _continue_from_last(result, run, check_model, check, last_run[0],
+                                       answer_run, check_noise)
+        if not check['feasible_check'] and check['feasible_run']:
+            return _continue_on_check_model(result, run, check_model, check, last_run[0],
+                                            check_noise)
     shift = np.zeros(k)
     while (continue_by == 'shift' and not check['feasible_check'] and check['feasible_run']
            and check['continuations'] < continuations):
@@ -763,6 +779,62 @@ def _check_and_continue(result: OptimizeResult, run: _Run,
         check.update(check_summary(np.asarray(result.g_best, float)[:len(g_c)], g_c, f_c,
                                    check_gtol), x_checked=x_best.tolist())
     return result, check
+
+
+def _converged_elsewhere(result: OptimizeResult, run: _Run, last_gap: float) -> bool:
+    """True when a stop test ended the run away from its answer.
+
+    The run's last iterate is infeasible on its model (max g > ``gtol``) and the answer,
+    its best feasible (or least violating) iterate, has an f more than ``last_gap``
+    (relative) above it: the run converged where its model calls no design feasible,
+    and its answer comes from elsewhere (on a noisy model, an early iterate).
+    """
+    if last_gap <= 0.0 or 'f' not in result or 'f_best' not in result:
+        return False
+    if str(result.get('stop_test', '')) in ('', 'maxiter', 'cancelled'):
+        return False
+    f_last = float(result.f)
+    return (float(result.max_violation) > float(run.options['gtol'])
+            and float(result.f_best) > f_last + last_gap * abs(f_last))
+
+
+def _continue_from_last(result: OptimizeResult, run: _Run, check_model: FullModel,
+                        check: dict[str, Any], last_run: FullEvaluation,
+                        answer_run: FullEvaluation,
+                        check_noise: tuple[float, float] | None
+                        ) -> tuple[OptimizeResult, dict[str, Any]]:
+    """Go on from the last iterate on the check model (the run converged elsewhere).
+
+    ``last_run`` and ``answer_run`` are the check model's runs of the last iterate and
+    of the answer (``check`` holds the answer's verdicts).  The continuation is
+    :func:`_continue_on_check_model`'s from the last iterate; the answer stays when the
+    check found it feasible and the continuation has nothing feasible below its f.
+    """
+    answer = {name: result[name] for name in
+              ('x_best', 'f_best', 'g_best', 'h_best', 'best_iteration', 'best_feasible',
+               'max_violation_best') if name in result}
+    start = OptimizeResult(result)
+    start.update(x_best=np.asarray(result.x, float).copy(), f_best=float(result.f),
+                 g_best=np.asarray(result.g, float).copy())
+    second, check = _continue_on_check_model(start, run, check_model, check, last_run,
+                                             check_noise)
+    first = check['first']
+    f_answer = float(answer_run.f[0])
+    better = (bool(second.get('best_feasible')) and 'f_best' in second
+              and float(second.f_best) < f_answer)
+    check.update(continued_from='last_iterate')
+    if first['feasible_check'] and not better:
+        k = len(answer_run.g[0])
+        g_best = np.r_[np.asarray(answer_run.g[0], float),
+                       np.asarray(answer['g_best'], float)[k:]]
+        second.update(answer, f_best=f_answer, g_best=g_best,
+                      max_violation_best=float(max(0.0, np.max(g_best))) if g_best.size
+                      else 0.0)
+        check.update({name: first[name] for name in
+                      ('f_check', 'max_violation_check', 'feasible_check')},
+                     x_checked=np.asarray(answer['x_best'], float).tolist(),
+                     continued_from='last_iterate, answer kept')
+    return second, check
 
 
 def _continue_on_check_model(result: OptimizeResult, run: _Run, check_model: FullModel,

@@ -15,18 +15,23 @@ GTOL = 5e-3  # config/vehicle.yaml integration.check.gtol: 0.05 % of the run bey
 
 
 def test_a_noisy_answer_infeasible_at_the_check_is_continued_on_the_check_model():
-    # 4-variable ride on the variable-step model (DOPRI5 at Adams' 1e-3) from the centre:
-    # its answer lies on the noisy model's tyre-hop boundary, which sits ~0.015 in g
-    # below the converged one (docs/noise_study.md), so the check at 1e-6 finds it
-    # infeasible; the run goes on on the check model and reports that model's values.
-    start = dict(benchmark_starts(4))['centre']
+    # 4-variable ride on the variable-step model (DOPRI5 at Adams' 1e-3): its answers lie
+    # on the noisy model's tyre-hop boundary, which sits ~0.015 in g below the converged
+    # one (docs/noise_study.md), so the check at 1e-6 finds them infeasible; the run goes
+    # on on the check model and reports that model's values.  Which start ends exactly
+    # on the boundary depends on the noise, that is on the machine's last bits (its
+    # libm): the first of three benchmark starts whose answer the check refuses.
     options = with_noise_levels(vehicle_options(), 'ride', 'variable_step')
-    request = TuningRequest('ride', 4, start, 'simplified', options, FD_STEP,
-                            integrator='variable_step')
     checking = check_options('ride', 4)
     assert checking['check_continue_by'] == 'tighter_model'  # config/vehicle.yaml
-    result = optimise(request, in_process_model('ride', 'variable_step'),
-                      SimplifiedGradient('ride', 4, None, FD_STEP), **checking)
+    starts = dict(benchmark_starts(4))
+    for label in ('centre', 'lhs2', 'lhs0'):
+        request = TuningRequest('ride', 4, starts[label], 'simplified', options, FD_STEP,
+                                integrator='variable_step')
+        result = optimise(request, in_process_model('ride', 'variable_step'),
+                          SimplifiedGradient('ride', 4, None, FD_STEP), **checking)
+        if result.check['first']['max_violation_check'] > GTOL:
+            break
     check = result.check
     assert check['first']['feasible_run'] and check['first']['max_violation_check'] > GTOL
     assert check['continued'] and check['continue_by'] == 'tighter_model'

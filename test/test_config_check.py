@@ -111,6 +111,14 @@ def test_an_unknown_continuation_of_the_answer_check_is_named(config_copy):
                                  "be one of shift, tighter_model, got 'model'")
 
 
+def test_a_negative_last_iterate_gap_of_the_answer_check_is_named(config_copy):
+    _edit(config_copy, 'vehicle.yaml', 'last_iterate_gap: 0.01', 'last_iterate_gap: -0.01')
+    with pytest.raises(ConfigError) as raised:
+        check_config()
+    assert str(raised.value) == ("config/vehicle.yaml: integration.check.last_iterate_gap "
+                                 "must be >= 0 and finite, got -0.01")
+
+
 @pytest.mark.ros
 def test_graph_with_a_bad_config_file_does_not_start_one_line_exit_2(config_copy):
     _edit(config_copy, 'design_space.yaml', SPRING_FRONT,

@@ -304,6 +304,73 @@ def test_a_continuation_on_the_check_model_at_the_iteration_limit_restarts_once(
     assert [r['iteration'] for r in result.history] == list(range(len(result.history)))
 
 
+def rough_model(points):
+    # quadratic_model with deterministic ripples standing in for a loose integrator's
+    # noise: 0.002 in f and 0.03 in g (the noise levels the run is given below)
+    run = quadratic_model(points)
+    p = np.atleast_2d(points)
+    return FullEvaluation(f=run.f + 0.002 * np.sin(3000 * p[:, 1]),
+                          g=run.g + 0.03 * np.sin(2000 * p[:, :1]), inputs=run.inputs)
+
+
+ROUGH_START = np.array([0.04, 0.02])
+ROUGH_OPTIONS = OPTIONS | {'noise_f': 2e-3, 'noise_g': 0.03}
+
+
+def test_a_run_that_converged_away_from_its_answer_goes_on_from_its_last_iterate():
+    # On the rippled model the noise test ends the run from (0.04, 0.02) at an iterate
+    # its model calls infeasible, f about 0.019, while its answer, an earlier feasible
+    # iterate, has f about 0.024: more than 1 % above.  The last iterate is checked
+    # (one more paid run) and the run goes on from it on the check model, reaching that
+    # model's optimum (0.2, 0.6), f = 0.02 (hand calculation, X_STAR).
+    request = TuningRequest('ride', 2, ROUGH_START, gradient_source='simplified',
+                            options=ROUGH_OPTIONS)
+    plain = optimise(request, rough_model, analytic_gradient)
+    assert plain.stop_test == 'noise' and plain.max_violation > 1e-3
+    assert plain.f_best > 1.01 * plain.f
+    result = optimise(request, rough_model, analytic_gradient, check_model=quadratic_model,
+                      check_gtol=1e-6, check_continue_by='tighter_model',
+                      check_last_gap=0.01)
+    check = result.check
+    assert check['continued'] and check['continued_from'] == 'last_iterate'
+    assert check['first']['feasible_check']  # the old answer was valid, only worse
+    np.testing.assert_allclose(result.x_best, X_STAR, atol=1e-4)
+    assert result.f_best == pytest.approx(0.02, rel=1e-3)
+    assert check['feasible_check'] and check['f_check'] == result.f_best
+    # paid: the first run's, the checks of the answer and of the last iterate, and the
+    # continuation's evaluations but its start (the last iterate's check)
+    assert result.n_full_runs == plain.n_full_runs + 2 + result.nfev - 1
+    # without the test (gap 0) the earlier iterate stays the answer
+    kept = optimise(request, rough_model, analytic_gradient, check_model=quadratic_model,
+                    check_gtol=1e-6, check_continue_by='tighter_model')
+    np.testing.assert_array_equal(kept.x_best, plain.x_best)
+    assert not kept.check['continued']
+
+
+def test_the_answer_stays_when_the_continuation_from_the_last_iterate_finds_nothing_better():
+    # The check model is feasible only within 1e-3 of the run's answer: the
+    # continuation from the last iterate finds nothing feasible, and the answer is the
+    # one checked first, with the check model's values, f = |x - (0.3, 0.7)|^2
+    # (hand calculation at that x).
+    request = TuningRequest('ride', 2, ROUGH_START, gradient_source='simplified',
+                            options=ROUGH_OPTIONS)
+    answer = optimise(request, rough_model, analytic_gradient).x_best
+
+    def island(points):
+        run = quadratic_model(points)
+        far = np.linalg.norm(np.atleast_2d(points) - answer, axis=1) > 1e-3
+        return FullEvaluation(f=run.f, g=run.g + 0.5 * far[:, None], inputs=run.inputs)
+
+    result = optimise(request, rough_model, analytic_gradient, check_model=island,
+                      check_gtol=1e-6, check_continue_by='tighter_model',
+                      check_last_gap=0.01)
+    assert result.check['continued_from'] == 'last_iterate, answer kept'
+    np.testing.assert_array_equal(result.x_best, answer)
+    assert result.f_best == pytest.approx(np.sum((answer - TARGET) ** 2), rel=1e-12)
+    assert result.best_feasible and result.check['feasible_check']
+    assert result.check['x_checked'] == answer.tolist()
+
+
 def test_an_unknown_continuation_of_the_check_is_refused():
     request = TuningRequest('ride', 2, gradient_source='simplified', options=OPTIONS)
     with pytest.raises(ValueError, match='check_continue_by must be one of'):
