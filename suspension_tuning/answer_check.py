@@ -41,7 +41,9 @@ class CheckSettings:
     (:data:`suspension_tuning.tuning.CONTINUE_BY`); ``last_iterate_gap``: relative f
     by which a run's answer may lie above its last iterate, infeasible on the run's
     model, before the run goes on from that iterate on the check's model (0: never;
-    ``tuning.optimise``'s ``check_last_gap``).
+    ``tuning.optimise``'s ``check_last_gap``); ``refine_noise_stop``: a run the noise
+    test ended on a model noisier than the check's goes on from its answer on the
+    check's model (``check_refine_noise_stop``).
     """
 
     rtol: float
@@ -50,6 +52,7 @@ class CheckSettings:
     continuations: int = 2
     continue_by: str = 'shift'
     last_iterate_gap: float = 0.0
+    refine_noise_stop: bool = False
 
     def __post_init__(self) -> None:
         """Positive, finite tolerances, a known continuation (ValueError naming the key)."""
@@ -77,7 +80,16 @@ def load_check_settings(path: str | Path | None = None) -> CheckSettings:
     return CheckSettings(float(check['rtol']), float(check['atol']),
                          float(check.get('gtol', 5e-3)), int(check.get('continuations', 2)),
                          str(check.get('continue_by', 'shift')),
-                         float(check.get('last_iterate_gap', 0.0)))
+                         float(check.get('last_iterate_gap', 0.0)),
+                         _flag(check.get('refine_noise_stop', False),
+                               'integration.check.refine_noise_stop'))
+
+
+def _flag(value: Any, key: str) -> bool:
+    """A YAML boolean (ValueError naming the key for anything else)."""
+    if not isinstance(value, bool):
+        raise ValueError(f'{key} must be true or false, got {value!r}')
+    return value
 
 
 def check_design(scenario: str, n_vars: int, x: ArrayLike,
@@ -113,7 +125,8 @@ def check_options(scenario: str, n_vars: int, settings: CheckSettings | None = N
 
     ``check_model`` (designs (1, n) -> ``FullEvaluation`` at the tighter tolerance, with
     the named metrics and the simplified model's inputs), ``check_gtol``,
-    ``check_continuations``, ``check_continue_by``, ``check_last_gap`` (config/vehicle.yaml
+    ``check_continuations``, ``check_continue_by``, ``check_last_gap``,
+    ``check_refine_noise_stop`` (config/vehicle.yaml
     ``integration.check``) and ``check_noise``, the check model's noise levels (f, g)
     (config/optimiser.yaml ``noise_levels``, integrator ``check``) for a run continued
     on it: what the coordinator passes for the built-in model, and an in-process run
@@ -139,6 +152,7 @@ def check_options(scenario: str, n_vars: int, settings: CheckSettings | None = N
             'check_continuations': settings.continuations,
             'check_continue_by': settings.continue_by,
             'check_last_gap': settings.last_iterate_gap,
+            'check_refine_noise_stop': settings.refine_noise_stop,
             'check_noise': noise_levels(scenario, CHECK_INTEGRATOR)}
 
 

@@ -119,6 +119,14 @@ def test_a_negative_last_iterate_gap_of_the_answer_check_is_named(config_copy):
                                  "must be >= 0 and finite, got -0.01")
 
 
+def test_a_refine_noise_stop_that_is_not_a_boolean_is_named(config_copy):
+    _edit(config_copy, 'vehicle.yaml', 'refine_noise_stop: true', 'refine_noise_stop: 1')
+    with pytest.raises(ConfigError) as raised:
+        check_config()
+    assert str(raised.value) == ("config/vehicle.yaml: integration.check.refine_noise_stop "
+                                 "must be true or false, got 1")
+
+
 @pytest.mark.ros
 def test_graph_with_a_bad_config_file_does_not_start_one_line_exit_2(config_copy):
     _edit(config_copy, 'design_space.yaml', SPRING_FRONT,

@@ -371,6 +371,35 @@ def test_the_answer_stays_when_the_continuation_from_the_last_iterate_finds_noth
     assert result.check['x_checked'] == answer.tolist()
 
 
+def test_a_run_the_noise_test_ended_goes_on_on_the_less_noisy_check_model():
+    # The run's model holds the constraint 0.03 stricter (x1 + x2 <= 0.77) and is given
+    # noise levels 1e-3 in f, 0.05 in g: from (0.1, 0.2) the noise test ends it near its
+    # optimum (0.185, 0.585), which the noise-free check model (x1 + x2 <= 0.8) confirms.
+    # With refine_noise_stop the run goes on on the check model to its optimum
+    # (0.2, 0.6), f = 0.02 (hand calculation, X_STAR); without, the answer stays.
+    def strict(points):
+        run = quadratic_model(points)
+        return FullEvaluation(f=run.f, g=run.g + 0.03, inputs=run.inputs)
+
+    request = TuningRequest('ride', 2, np.array([0.1, 0.2]), gradient_source='simplified',
+                            options=OPTIONS | {'noise_f': 1e-3, 'noise_g': 0.05})
+    checking = {'check_model': quadratic_model, 'check_gtol': 1e-6,
+                'check_continue_by': 'tighter_model', 'check_noise': (0.0, 0.0)}
+    kept = optimise(request, strict, analytic_gradient, **checking)
+    assert kept.stop_test == 'noise' and kept.check['feasible_check']
+    assert not kept.check['continued']
+    np.testing.assert_allclose(kept.x_best, [0.185, 0.585], atol=1e-4)
+    refined = optimise(request, strict, analytic_gradient, check_refine_noise_stop=True,
+                       **checking)
+    assert refined.check['continued']
+    assert refined.check['continued_from'] == 'answer, noise stop'
+    np.testing.assert_allclose(refined.x_best, X_STAR, atol=1e-4)
+    assert refined.f_best == pytest.approx(0.02, rel=1e-3)
+    # paid: the first run's, the check's one run, the continuation's evaluations but its
+    # start (the check's run of the answer)
+    assert refined.n_full_runs == kept.n_full_runs + refined.nfev - 1
+
+
 def test_an_unknown_continuation_of_the_check_is_refused():
     request = TuningRequest('ride', 2, gradient_source='simplified', options=OPTIONS)
     with pytest.raises(ValueError, match='check_continue_by must be one of'):
