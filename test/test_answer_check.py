@@ -50,3 +50,20 @@ def test_a_check_setting_of_an_unknown_continuation_is_refused_by_name():
     with pytest.raises(ValueError, match=r"integration.check.continue_by must be one of "
                                          r"shift, tighter_model, got 'again'"):
         CheckSettings(1e-6, 1e-6, continue_by='again')
+
+
+@pytest.mark.parametrize('continued_from, words', [
+    ('answer', 'from the answer, which the check found infeasible'),
+    ('answer, noise stop', 'where the noise test ended the run'),
+    ('last_iterate', 'converged away from its answer:'),
+    ('last_iterate, answer kept', 'so the answer stays'),
+])
+def test_the_check_note_says_where_a_continuation_started(continued_from, words):
+    from suspension_tuning.nodes.coordinator import check_note
+
+    first = {'feasible_run': True, 'feasible_check': True, 'max_violation_check': 0.0015}
+    note = check_note({'first': first, 'check_gtol': GTOL, 'continued': True,
+                       'continue_by': 'tighter_model', 'continued_from': continued_from,
+                       'max_violation_check': 0.0, 'feasible_check': True})
+    assert words in note
+    assert note.endswith("the answer's max g there 0 (feasible)")

@@ -219,6 +219,19 @@ def set_check(message: Optimise.Result, result: Any, note: str = '') -> None:
     message.check_note = check_note(check)
 
 
+#: Where a continuation on the tighter-tolerance model started (``check['continued_from']``).
+CONTINUED_FROM = {
+    'answer': 'from the answer, which the check found infeasible',
+    'answer, noise stop': ("from the answer, where the noise test ended the run within "
+                           "its model's noise"),
+    'last_iterate': ('from the last iterate, where the run converged away from its '
+                     'answer'),
+    'last_iterate, answer kept': ('from the last iterate, where the run converged away '
+                                  'from its answer; nothing better was found there, so '
+                                  'the answer stays'),
+}
+
+
 def check_note(check: dict[str, Any]) -> str:
     """Both verdicts of the check in words (``tuning.optimise``'s ``check``)."""
     first = check.get('first', check)
@@ -227,8 +240,9 @@ def check_note(check: dict[str, Any]) -> str:
             f"({'feasible' if first['feasible_check'] else 'infeasible'}, "
             f"tolerance {check.get('check_gtol', math.nan):.3g})")
     if check.get('continued') and check.get('continue_by') == 'tighter_model':
-        text += (f"; continued on the tighter-tolerance model: the answer's max g there "
-                 f"{check['max_violation_check']:.4g} "
+        text += (f"; continued on the tighter-tolerance model "
+                 f"{CONTINUED_FROM.get(check.get('continued_from', ''), '')}: the "
+                 f"answer's max g there {check['max_violation_check']:.4g} "
                  f"({'feasible' if check['feasible_check'] else 'infeasible'})")
         if not check['feasible_check']:
             text += '; no design feasible at the tighter tolerance was found'
