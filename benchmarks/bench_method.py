@@ -70,6 +70,14 @@ Definitions (``suspension_tuning.studies.method_benchmark``):
   the paid figures on the noisy model with every method's answer judged by the
   fixed-step model's g (its gap already is): a peer's answer is then solved only
   when the converged physics finds it feasible, as ours is after the check.
+* **Noise realisations** (``--noise-realisations R``, noisy part only).  The noisy
+  model's noise is a function of the design that differs from machine to machine (the
+  last bits of its libm and its compiled kernels): a design moved by 1e-9 already draws
+  an independent sample of it (at the fixed-step optimum f moves by 1.7 %, the
+  front-left tyre-hop g by 0.017), so the same start on another machine follows
+  another path.  With R > 1 every start runs R times, moved by k * 1e-9 (k = 0 ..
+  R-1): what R machines would give, and the figures (medians, counts) are over the
+  6 R runs.
 * **Rounds** (``method_benchmark.rounds``): sequential full-run rounds with a pool of
   P = 1, 4, 16 workers: the calibration's samples P at a time, every other paid run one
   round (Dynamic-Q, COBYLA and COBYQA are sequential; NOMAD and Optuna ran here one
@@ -108,6 +116,7 @@ The peers' runs go to ``--jobs`` worker processes (default: 2 when the machine i
 otherwise idle, 1-minute load average below 0.5, else 1; the figures do not depend on it).
 
 Run: .venv/bin/python benchmarks/bench_method.py [--jobs N] [--part all|small|fixed|noisy]
+[--noise-realisations R]
 (the three parts are independent; three processes can run them side by side).
 """
 
@@ -314,6 +323,10 @@ def main() -> None:
                              'processes can run them side by side)')
     parser.add_argument('--peers', default=','.join(PEERS),
                         help='comma-separated peers to run (default: all)')
+    parser.add_argument('--noise-realisations', type=int, default=1, metavar='R',
+                        help='noisy part: run every start R times, moved by k * 1e-9 '
+                             '(k = 0 .. R-1), each an independent draw of the noise (see '
+                             'above); the figures are then over 6 R runs')
     parser.add_argument('--no-baselines', action='store_true',
                         help='leave out Dynamic-Q with full-model gradients and SLSQP '
                              '(their ratios are then not printed)')
@@ -347,10 +360,30 @@ def main() -> None:
     if args.part in ('all', 'fixed'):
         run_fixed(reference, starts, peers, t0)
     if args.part in ('all', 'noisy'):
-        run_noisy(reference, starts, peers)
+        realisations = max(1, args.noise_realisations)
+        print(f'ride4_noise_realisations: {realisations}')
+        run_noisy(reference, noise_realisations(starts, realisations), peers)
     for name, target in TARGETS.items():
         print(f'target_{name}: {target}')
     print(f'bench_method_wall_s: {time.perf_counter() - t0:.1f}')
+
+
+#: Normalised move of a start that draws another realisation of the noisy model's noise.
+REALISATION_STEP = 1e-9
+
+
+def noise_realisations(starts: list, realisations: int) -> list:
+    """Every start ``realisations`` times, the k-th moved by k * 1e-9 along every variable.
+
+    Labels 'centre', 'centre~1', ...; the moved starts stay within the bounds (eqs. 4-8).
+    """
+    out = []
+    for k in range(realisations):
+        for label, x0 in starts:
+            x = np.asarray(x0, float) + k * REALISATION_STEP
+            x = np.where(x > 1.0, np.asarray(x0, float) - k * REALISATION_STEP, x)
+            out.append((label if k == 0 else f'{label}~{k}', x))
+    return out
 
 
 def run_fixed(reference: mb.Reference, starts: list, peers: dict, t0: float) -> None:
