@@ -103,28 +103,19 @@ def test_a_missing_key_or_a_number_as_text_in_the_vehicle_is_named(config_copy):
                             "a number, could not convert string to float: 'about 0.95'")
 
 
-def test_an_unknown_continuation_of_the_answer_check_is_named(config_copy):
-    _edit(config_copy, 'vehicle.yaml', 'continue_by: tighter_model', 'continue_by: model')
+@pytest.mark.parametrize('line, bad, message', [
+    ('continue_by: tighter_model', 'continue_by: model',
+     "integration.check.continue_by must be one of shift, tighter_model, got 'model'"),
+    ('last_iterate_gap: 0.01', 'last_iterate_gap: -0.01',
+     'integration.check.last_iterate_gap must be >= 0 and finite, got -0.01'),
+    ('refine_noise_stop: true', 'refine_noise_stop: 1',
+     'integration.check.refine_noise_stop must be true or false, got 1'),
+])
+def test_a_bad_setting_of_the_answer_check_is_named(config_copy, line, bad, message):
+    _edit(config_copy, 'vehicle.yaml', line, bad)
     with pytest.raises(ConfigError) as raised:
         check_config()
-    assert str(raised.value) == ("config/vehicle.yaml: integration.check.continue_by must "
-                                 "be one of shift, tighter_model, got 'model'")
-
-
-def test_a_negative_last_iterate_gap_of_the_answer_check_is_named(config_copy):
-    _edit(config_copy, 'vehicle.yaml', 'last_iterate_gap: 0.01', 'last_iterate_gap: -0.01')
-    with pytest.raises(ConfigError) as raised:
-        check_config()
-    assert str(raised.value) == ("config/vehicle.yaml: integration.check.last_iterate_gap "
-                                 "must be >= 0 and finite, got -0.01")
-
-
-def test_a_refine_noise_stop_that_is_not_a_boolean_is_named(config_copy):
-    _edit(config_copy, 'vehicle.yaml', 'refine_noise_stop: true', 'refine_noise_stop: 1')
-    with pytest.raises(ConfigError) as raised:
-        check_config()
-    assert str(raised.value) == ("config/vehicle.yaml: integration.check.refine_noise_stop "
-                                 "must be true or false, got 1")
+    assert str(raised.value) == f'config/vehicle.yaml: {message}'
 
 
 @pytest.mark.ros

@@ -80,12 +80,17 @@ def test_ride_optimisation_through_the_one_process_graph_gives_the_in_process_bi
     # Every full run went over the middleware: the calibration batch (its 12 samples in
     # three pieces of 4: one worker, pieces_per_worker = 3, config/graph.yaml), one per iteration
     # evaluated, the baseline design's run (its physical metrics in the result) and the
-    # telemetry run of the optimum (final_telemetry).
-    assert nodes[0].evaluate_calls == 3 + len(result.history) + 1 + 1
+    # telemetry run of the optimum (final_telemetry).  A continuation on the check's
+    # model (where the check refuses the answer: at this answer its largest g sits within
+    # one lift-off sample of the tolerance, so the machine's libm decides) runs in the
+    # coordinator, not over the middleware: its records are not the workers'.
+    local = in_process_optimum(coordinator.options.as_dict(), SAMPLES)
+    over_middleware = (local.check['first_iteration'] if local.check['continued']
+                       else len(result.history))
+    assert nodes[0].evaluate_calls == 3 + over_middleware + 1 + 1
     assert len(result.baseline_metrics) == len(result.metrics) == len(result.metric_names)
     assert [m.feedback.phase for m in feedback].count('iteration') == len(result.history)
     assert result.n_calibration_runs == SAMPLES
-    local = in_process_optimum(coordinator.options.as_dict(), SAMPLES)
     # The result reports the in-process run's best iterate, by its iteration in the
     # history; the last iterate stays the history's last record.
     np.testing.assert_array_equal(result.x, local.x_best)

@@ -54,11 +54,14 @@ def test_ride_optimisation_with_simplified_gradients_converges_through_the_graph
     # Paper section 2: one full run per iteration (per evaluation) and 2n simplified
     # runs per gradient, plus one at the iterate for the correction's values; no
     # full-model gradient runs.
-    # and the check of the answer at the tighter tolerance, paid too (feasible: no
-    # continuation)
+    # and the check of the answer at the tighter tolerance, paid too.  At this answer
+    # the check's largest g sits within one lift-off sample (0.00074) of its tolerance
+    # 0.005, so the machine's libm decides whether it refuses it; a refused answer goes
+    # on on the check model, whose first record is the check's run (no extra run).
+    local = in_process_optimum(graph['coordinator'].options.as_dict(), SAMPLES)
     iterations_evaluated = len(result.history)
     assert result.check == 'feasible'
-    assert result.n_full_runs == iterations_evaluated + 1
+    assert result.n_full_runs == iterations_evaluated + (0 if local.check['continued'] else 1)
     assert result.n_simplified_runs % (2 * n + 1) == 0 and result.n_simplified_runs > 0
     phases = [message.feedback.phase for message in feedback]
     assert phases.count('iteration') == len(result.history)
@@ -69,7 +72,6 @@ def test_ride_optimisation_with_simplified_gradients_converges_through_the_graph
     assert calibration == [(4, SAMPLES), (8, SAMPLES), (SAMPLES, SAMPLES)]
     assert phases[:3] == ['calibration'] * 3
     # The same loop in-process, with the in-process eq. 25 calibration: same bits.
-    local = in_process_optimum(graph['coordinator'].options.as_dict(), SAMPLES)
     np.testing.assert_array_equal(result.x, local.x_best)  # the reported (best) design
     assert result.f == local.f_best and result.best_iteration == local.best_iteration
     assert result.n_simplified_runs == local.n_simplified_runs
