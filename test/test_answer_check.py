@@ -25,7 +25,7 @@ def test_a_noisy_answer_infeasible_at_the_check_is_continued_on_the_check_model(
     checking = check_options('ride', 4)
     assert checking['check_continue_by'] == 'tighter_model'  # config/vehicle.yaml
     starts = dict(benchmark_starts(4))
-    for label in ('centre', 'lhs2', 'lhs0'):
+    for label in ('lhs2', 'centre', 'lhs0'):
         request = TuningRequest('ride', 4, starts[label], 'simplified', options, FD_STEP,
                                 integrator='variable_step')
         result = optimise(request, in_process_model('ride', 'variable_step'),

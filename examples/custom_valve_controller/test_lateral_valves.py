@@ -37,9 +37,13 @@ def test_ride_optimisation_runs_with_our_valve_controller_and_is_recorded(start_
     iterations = [f for f in progress if f.phase == 'iteration']  # after 'calibration'
     assert len(iterations) == len(result.history)
     # one full run per iteration, and one for the check of the answer at a tighter solver
-    # tolerance (paid too; feasible, so the run did not continue)
+    # tolerance (paid too).  Here the check's largest g sits within one lift-off sample
+    # of its tolerance, so the machine's arithmetic decides whether it refuses the
+    # answer; a refused answer goes on on the check's model, whose first record is the
+    # check's own run (no extra run).
     assert result.check == 'feasible'
-    assert result.n_full_runs == len(result.history) + 1
+    continued = 'continued on the tighter-tolerance model' in result.check_note
+    assert result.n_full_runs == len(result.history) + (0 if continued else 1)
     assert result.physical_names[0] == 'dpsf_front'
 
     bag = graph.recorded_bag()  # the run's bag, once the recorder has closed it
