@@ -732,32 +732,28 @@ def _check_and_continue(result: OptimizeResult, run: _Run,
     not (:func:`_noise_limited`).
     """
     terms, evaluated = run.terms, run.evaluated
-    last_run: list[FullEvaluation] = []
-
-    def checked(x: Array) -> tuple[float, Array]:
+    def checked(x: Array) -> tuple[float, Array, FullEvaluation]:
         evaluation = check_model(np.asarray(x, float)[None, :])
         run.counter.full_runs += 1
-        last_run[:] = [evaluation]
-        return float(evaluation.f[0]), np.asarray(evaluation.g[0], float)
+        return float(evaluation.f[0]), np.asarray(evaluation.g[0], float), evaluation
 
     x_best = np.asarray(result.x_best, float)
     # the g rows (eq. 11, then the extra constraints) as reported: no run of x_best,
     # which a resumed run may have only in the bag's history
     k = len(np.asarray(result.g_best, float))
-    f_c, g_c = checked(x_best)
+    f_c, g_c, answer_run = checked(x_best)
     check = check_summary(np.asarray(result.g_best, float)[:len(g_c)], g_c, f_c, check_gtol)
     check.update(continued=False, continuations=0, first=dict(check),
                  x_checked=x_best.tolist(), check_gtol=check_gtol, continue_by=continue_by)
     if continue_by == 'tighter_model' and continuations > 0:
         if _converged_elsewhere(result, run, last_gap):
-            answer_run = last_run[0]
-            checked(result.x)
-            return _continue_from_last(result, run, check_model, check, last_run[0],
+            last_run = checked(result.x)[2]
+            return _continue_from_last(result, run, check_model, check, last_run,
                                        answer_run, check_noise)
         refine = refine_noise_stop and _noise_limited(result, run, check_noise)
         if refine or (not check['feasible_check'] and check['feasible_run']):
             check.update(continued_from='answer, noise stop' if refine else 'answer')
-            return _continue_on_check_model(result, run, check_model, check, last_run[0],
+            return _continue_on_check_model(result, run, check_model, check, answer_run,
                                             check_noise)
     shift = np.zeros(k)
     while (continue_by == 'shift' and not check['feasible_check'] and check['feasible_run']
@@ -786,7 +782,7 @@ def _check_and_continue(result: OptimizeResult, run: _Run,
         if cancelled or 'x_best' not in result:
             break
         x_best = np.asarray(result.x_best, float)
-        f_c, g_c = checked(x_best)
+        f_c, g_c, _ = checked(x_best)
         check.update(check_summary(np.asarray(result.g_best, float)[:len(g_c)], g_c, f_c,
                                    check_gtol), x_checked=x_best.tolist())
     return result, check
