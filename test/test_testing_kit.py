@@ -197,6 +197,7 @@ def test_a_goal_ends_with_its_status_result_and_feedback(ros_context, ros_execut
                             Optimise.Goal(scenario='ride', n_vars=2), timeout_s=30.0,
                             feedback_callback=received.append, action_name='/kit/optimise')
     finally:
+        ros_executor.remove(node)  # no spin holds the server when it is destroyed
         server.destroy()
     assert outcome.status == GoalStatus.STATUS_SUCCEEDED
     assert outcome.result.success and outcome.result.iterations == 2
@@ -233,6 +234,7 @@ def test_an_unfinished_goal_times_out_naming_the_action_and_is_cancelled(
                       action_name='/kit/optimise')
         assert cancelled.wait(10.0), 'the timed-out goal was not cancelled'
     finally:
+        ros_executor.remove(node)  # no spin holds the server when it is destroyed
         server.destroy()
 
 

@@ -299,9 +299,9 @@ def test_ctrl_c_cancels_the_running_goal_and_exits_130(ros_context, executor):
             goal_handle.abort()
         return Optimise.Result(message='cancelled')
 
-    _, server, process = _serve_and_tune(ros_context, executor, '/held/optimise', execute,
-                                         cancel_callback=lambda _: CancelResponse.ACCEPT,
-                                         callback_group=ReentrantCallbackGroup())
+    node, server, process = _serve_and_tune(ros_context, executor, '/held/optimise', execute,
+                                            cancel_callback=lambda _: CancelResponse.ACCEPT,
+                                            callback_group=ReentrantCallbackGroup())
     try:
         assert started.wait(60.0), 'the goal never arrived'
         process.send_signal(signal.SIGINT)
@@ -309,6 +309,7 @@ def test_ctrl_c_cancels_the_running_goal_and_exits_130(ros_context, executor):
     finally:
         if process.poll() is None:
             process.kill()
+    executor.remove(node)
     server.destroy()
     assert cancelled.wait(10.0), 'no cancel request reached the server: ' + stderr
     assert process.returncode == 130, stderr
@@ -381,7 +382,7 @@ def test_a_server_that_never_answers_the_goal_is_an_error_not_a_hang(ros_context
 
 
 def _two_servers(ros_context, executor, action: str):
-    """Two Optimise servers of ``action`` (two nodes), spun by ``executor``: each goal
+    """Two (node, Optimise server) pairs of ``action``, spun by ``executor``: each goal
     is held until it is cancelled (60 s at most), and its end listed ('cancelled' or
     'aborted')."""
     import time
@@ -408,9 +409,10 @@ def _two_servers(ros_context, executor, action: str):
     servers = []
     for k in range(2):
         node = Node(f'twin_coordinator_{k}', context=ros_context)
-        servers.append(ActionServer(node, Optimise, action, execute,
-                                    cancel_callback=lambda _: CancelResponse.ACCEPT,
-                                    callback_group=ReentrantCallbackGroup()))
+        server = ActionServer(node, Optimise, action, execute,
+                              cancel_callback=lambda _: CancelResponse.ACCEPT,
+                              callback_group=ReentrantCallbackGroup())
+        servers.append((node, server))
         executor.add(node)
     return servers, ended
 
@@ -422,7 +424,8 @@ def test_tune_refuses_an_action_two_servers_serve_before_sending_the_goal(
         run = subprocess.run([str(Path(sys.prefix) / 'bin' / 'tune'), '--action',
                               '/twice/optimise'], capture_output=True, text=True, timeout=120)
     finally:
-        for server in servers:
+        for node, server in servers:
+            executor.remove(node)  # no spin holds the server when it is destroyed
             server.destroy()
     assert run.returncode == 2, run.stderr
     assert (f'error: 2 action servers /twice/optimise on ROS domain {ros_domain_id} '
@@ -447,7 +450,8 @@ def test_a_goal_two_servers_accept_is_reported_and_cancelled_not_a_crash(
         while len(ended) < 2 and time.monotonic() < deadline:
             time.sleep(0.05)
     finally:
-        for server in servers:
+        for node, server in servers:
+            executor.remove(node)  # no spin holds the server when it is destroyed
             server.destroy()
     assert run.returncode == 2, run.stdout + run.stderr
     # rclpy either raises for the second acceptance or logs it: the count says 2 either way
