@@ -113,6 +113,19 @@ def test_the_six_start_points():
         assert sorted(((axis - 0.001) / 0.999 * 4).astype(int)) == [0, 1, 2, 3]
 
 
+def test_more_starts_are_a_latin_hypercube_of_their_own_beside_the_six():
+    more = mb.more_starts(8, 18)
+    assert [name for name, _ in more] == [f'more{k}' for k in range(18)]
+    points = np.array([x for _, x in more])
+    # a Latin hypercube: one point per eighteenth of every axis, inside [0.001, 1]
+    for axis in points.T:
+        assert sorted(((axis - 0.001) / 0.999 * 18).astype(int)) == list(range(18))
+    six = np.array([x for _, x in mb.benchmark_starts(8)])
+    assert np.abs(six[:, None, :] - points[None]).max(axis=2).min() > 0.1  # none near one
+    with pytest.raises(ValueError, match='count must be >= 1, got 0'):
+        mb.more_starts(8, 0)
+
+
 # Known optima on the fixed-step model (the method study's reference search, max g <=
 # 1e-3); the file holds the best known, which may be lower than these.
 KNOWN = {

@@ -131,6 +131,23 @@ def benchmark_starts(n_vars: int) -> list[tuple[str, Array]]:
     return starts + [(f'lhs{k}', np.asarray(x, float)) for k, x in enumerate(lhs)]
 
 
+def more_starts(n_vars: int, count: int) -> list[tuple[str, Array]]:
+    """``count`` start points beyond :func:`benchmark_starts`, for a success rate.
+
+    ``0.001 + 0.999 * scipy.stats.qmc.LatinHypercube(d=n_vars, seed=LHS_SEED + 1)
+    .random(count)`` (normalised units), labelled 'more0', 'more1', ...: a design of
+    its own (seeded apart from the benchmark's four points, which a hypercube of
+    another size would not keep), so that the benchmark's 6 starts and these together
+    estimate how often a run from a start nobody chose is solved.
+    """
+    from scipy.stats import qmc
+
+    if count < 1:
+        raise ValueError(f'count must be >= 1, got {count}')
+    lhs = 0.001 + 0.999 * qmc.LatinHypercube(d=n_vars, seed=LHS_SEED + 1).random(count)
+    return [(f'more{k}', np.asarray(x, float)) for k, x in enumerate(lhs)]
+
+
 def gap_pct(f: float, f_ref: float) -> float:
     """100 (f - f_ref) / |f_ref|."""
     return 100.0 * (float(f) - float(f_ref)) / abs(float(f_ref))
