@@ -115,6 +115,18 @@ class FullEvaluation:
 #: constraints shifted by the offset the check measured) or 'tighter_model' (on the
 #: check's model itself, from the answer).
 CONTINUE_BY = ('shift', 'tighter_model')
+#: Where a continuation on the check's model started (``check['continued_from']``, the
+#: keys), in words (the coordinator's ``check_note``, the bag, ``tune``).
+CONTINUED_FROM = {
+    'answer': 'from the answer, which the check found infeasible',
+    'answer, noise stop': ("from the answer, where the noise test ended the run within "
+                           "its model's noise"),
+    'last_iterate': ('from the last iterate, where the run converged away from its '
+                     'answer'),
+    'last_iterate, answer kept': ('from the last iterate, where the run converged away '
+                                  'from its answer; nothing better was found there, so '
+                                  'the answer stays'),
+}
 
 #: Full model on a batch: designs (m, n) -> FullEvaluation.
 FullModel = Callable[[Array], FullEvaluation]

@@ -75,6 +75,7 @@ from suspension_tuning.paths import config_dir, dump_yaml, read_yaml
 from suspension_tuning.physical_metrics import SHOWN, physical_metrics
 from suspension_tuning.reported_design import design_success, reported_design, result_message
 from suspension_tuning.tuning import (
+    CONTINUED_FROM,
     INPUT_SCENARIOS,
     FullEvaluation,
     RunCancelled,
@@ -217,19 +218,6 @@ def set_check(message: Optimise.Result, result: Any, note: str = '') -> None:
     message.check = 'feasible' if check['feasible_check'] else 'infeasible'
     message.check_max_violation = float(check['max_violation_check'])
     message.check_note = check_note(check)
-
-
-#: Where a continuation on the tighter-tolerance model started (``check['continued_from']``).
-CONTINUED_FROM = {
-    'answer': 'from the answer, which the check found infeasible',
-    'answer, noise stop': ("from the answer, where the noise test ended the run within "
-                           "its model's noise"),
-    'last_iterate': ('from the last iterate, where the run converged away from its '
-                     'answer'),
-    'last_iterate, answer kept': ('from the last iterate, where the run converged away '
-                                  'from its answer; nothing better was found there, so '
-                                  'the answer stays'),
-}
 
 
 def check_note(check: dict[str, Any]) -> str:
