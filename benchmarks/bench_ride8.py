@@ -168,7 +168,7 @@ def run_case(scenario: str, n_vars: int, integrator: str, peers: tuple[str, ...]
                                       starts, log=log, stop_when_solved=True)
     summaries = {m: mb.summary(rs) for m, rs in results.items()}
     ours = summaries['dq_simplified']['median_full_runs']
-    figures = mb.peer_figures(results, ours, n_samples)
+    figures = mb.peer_figures(results, ours, n_samples) if peers else None
     return {'scenario': scenario, 'n_vars': n_vars, 'integrator': integrator,
             'budget': PEER_BUDGET,
             'reference': reference, 'results': results, 'summaries': summaries,
@@ -218,6 +218,8 @@ def print_case(scenario: str, out: dict, suffix: str) -> None:
                for r in out['results']['dq_simplified']]
     print(f'{case}_paid_full_runs_to_stop{suffix}: {runs(float(np.median(to_stop)))} '
           f'(per start {", ".join(runs(v) for v in to_stop)})')
+    if p is None:  # --peers none: ours alone
+        return
     for peer, median in p['peer_medians'].items():
         m = out['summaries'][peer]
         print(f'peer_median_full_runs_{peer}_{case}{suffix}: {runs(median)} '
@@ -390,7 +392,8 @@ def main() -> None:
                         help="search the case's 8-variable reference and write it "
                              '(see above)')
     parser.add_argument('--peers', default='cobyla',
-                        help="comma-separated peers, or 'all' (default cobyla)")
+                        help="comma-separated peers, 'all', or 'none' (ours alone; no "
+                             'ratio lines) (default cobyla)')
     parser.add_argument('--noisy', action='store_true',
                         help='the variable-step model too')
     parser.add_argument('--ratio-n', type=int, nargs='*', default=None,
@@ -420,14 +423,17 @@ def main() -> None:
     if args.write_reference:
         write_reference(args.scenario)
         return
-    peers = PEERS if args.peers == 'all' else tuple(p for p in args.peers.split(',') if p)
+    peers = (PEERS if args.peers == 'all' else () if args.peers == 'none'
+             else tuple(p for p in args.peers.split(',') if p))
     unknown = [p for p in peers if p not in PEERS]
     if unknown:
         raise SystemExit(f'unknown peer(s) {unknown}; valid: {", ".join(PEERS)}, all')
     install_study_extra()
     t0 = time.perf_counter()
     scenario = args.scenario
-    print(f'{scenario}{N_VARS}_peers: {",".join(peers)}')
+    if not peers and args.plot_dir is not None:
+        parser.error('--plot-dir plots ours against the peers: name at least one peer')
+    print(f'{scenario}{N_VARS}_peers: {",".join(peers) or "none"}')
     if TWO_STATE_FOLDER is not None:
         print(f'{scenario}{N_VARS}_design: preset two_state8 of {TWO_STATE_FOLDER} '
               '(suspension_tuning.studies.two_state)')
@@ -449,6 +455,8 @@ def main() -> None:
     for n in sorted(set(sizes)):
         out = cases[n]
         p = out['peers']
+        if p is None:
+            continue
         ours = out['summaries']['dq_simplified']['median_full_runs']
         print(f'ratio_by_n: {scenario} n {n}, ours_median_full_runs {runs(ours)}, ours_solved '
               f'{out["summaries"]["dq_simplified"]["starts_solved"]}, best_peer '
