@@ -10,11 +10,11 @@ the handling state, the valve controller switching between them; f the mean of e
 and 10, eq. 11 over the whole run), the preset ``two_state8`` of the configuration
 folder ``suspension_tuning.studies.two_state`` writes (per axle the soft and stiff gas
 volume, the low and high dpsf; docs/design_space.md), written to a temporary folder
-before the models load.  The pitch-plane model that gives the ride's
-gradients sees the split damper and the gas volumes, not the bars: their columns are
-seeded with one full run each and then learnt by the secant correction
-(optim/correction.py).  The handling model sees all 8 (the bars in eq. 14's roll
-moment).  The mixed case's simplified model is both (vehicle.simplified.run_mixed_simplified).
+before the models load.  The ride's 8-variable gradients come from the roll-and-pitch
+model (config/simplified_models.yaml ``ride_model: auto``: the design has a bar), which
+sees all 8: the split damper, the gas volumes and the bars, each tyre on its own track.
+The handling model sees all 8 too (the bars in eq. 14's roll moment).  The mixed
+case's simplified model is both (vehicle.simplified.run_mixed_simplified).
 Lines are prefixed ``ride8_``, ``handling8_`` or ``mixed8_``.
 
 What it runs from the 6 benchmark starts (``method_benchmark.benchmark_starts(8)``:
@@ -23,8 +23,9 @@ with ``--noisy``, on the noisy variable-step one:
 
 * ours: Dynamic-Q with simplified gradients and the correction, after the calibration a
   tuning goal spends by default, shared by the starts (config/simplified_models.yaml
-  ``scaling.run_samples``: none for 2 and 4 variables, unit scaling; 16 full-model
-  samples for 8, the maximin Latin hypercube: the 2^8 corners do not fit;
+  ``scaling.run_samples``: none for the ride at any size, unit scaling; 4 full-model
+  samples for handling; a case not listed, such as the two states, ``n_samples``,
+  16, the maximin Latin hypercube, as the 2^8 corners do not fit;
   ``--calibration-samples N`` for N);
 * the peers of ``--peers`` (default COBYLA; ``all``: COBYLA, COBYQA, NOMAD, Optuna TPE),
   each with a budget of 300 full runs, stopping at its first solved design.
