@@ -520,10 +520,11 @@ def optimise(request: TuningRequest, full_model: FullModel,
         ``best_iteration``, ``best_feasible`` and ``constraint_values_best``; see
         :func:`~suspension_tuning.optim.dynamic_q.dynamic_q`).  ``stop_test`` names
         the test that ended the run ('xtol', 'ftol', 'noise', 'bound_kkt', 'rho_min', 'maxiter',
-        'cancelled'); ``restarts``: how often a corrected run that reached the
-        iteration limit started again from its answer (CorrectionOptions
-        ``restarts``; the history holds every run's records, numbered on, and the
-        message says so); with ``check_model``, ``check`` holds the check's verdicts
+        'cancelled'); ``restarts``: how often a corrected run that ended by one of
+        CorrectionOptions ``restart_after`` started again from its answer
+        (``restarts``; ``restarted_after`` the stop tests it restarted after; the
+        history holds every run's records, numbered on, and the message says so);
+        with ``check_model``, ``check`` holds the check's verdicts
         (:func:`check_summary`).  Every history record
         whose full run returned named metrics holds them (``metrics``: name -> value,
         the objective scenario's), and ``metrics_best`` those of the reported design.
@@ -561,8 +562,8 @@ def optimise(request: TuningRequest, full_model: FullModel,
                    gradient_source=request.gradient_source,
                    surrogate_rule_constraints=staircase)
     cancelled = _drive(opt, run, 0)
-    result, cancelled, restarts = _restart_at_limit(opt.result(), cancelled, run)
-    _note_restarts(result, restarts)
+    result, cancelled, restarted_after = _restart_after_stop(opt.result(), cancelled, run)
+    _note_restarts(result, restarted_after)
     check: dict[str, Any] | None = None
     if check_model is not None and not cancelled and 'x_best' in result:
         result, check = _check_and_continue(result, run, check_model, check_gtol,
@@ -659,31 +660,46 @@ def _drive(opt: DynamicQ, run: _Run, first_iteration: int) -> bool:
     return cancelled
 
 
-def _restart_at_limit(result: OptimizeResult, cancelled: bool, run: _Run
-                      ) -> tuple[OptimizeResult, bool, int]:
-    """Start a corrected run that ended at the iteration limit again from its answer.
+def _restart_after_stop(result: OptimizeResult, cancelled: bool, run: _Run
+                        ) -> tuple[OptimizeResult, bool, list[str]]:
+    """Start a corrected run that ended by a restarting stop test again from its answer.
 
     A run whose correction learnt from its full runs (the simplified models gave values)
-    starts again, at most ``correction_options.restarts`` times: the correction afresh
-    at the answer (a blind variable's column seeded there again), Dynamic-Q with its
-    first move limit.  Returns (result, cancelled, restarts).
+    and that ended by one of ``correction_options.restart_after`` (the iteration limit,
+    the ftol test) starts again, at most ``correction_options.restarts`` times: the
+    correction afresh at the answer (a blind variable's column seeded there again),
+    Dynamic-Q with its first move limit.  Returns (result, cancelled, the stop tests it
+    restarted after).
     """
-    restarts = 0
+    after: list[str] = []
+    options = run.correction_options
     while (run.corrections[0] is not None and not cancelled
-           and restarts < run.correction_options.restarts
-           and result.get('stop_test') == 'maxiter' and 'x_best' in result):
+           and len(after) < options.restarts
+           and result.get('stop_test') in options.restart_after and 'x_best' in result):
+        after.append(str(result['stop_test']))
         run.corrections[0] = None
         result, cancelled = _run_from_answer(result, run)
-        restarts += 1
-    return result, cancelled, restarts
+    return result, cancelled, after
 
 
-def _note_restarts(result: OptimizeResult, restarts: int) -> None:
-    """Put how often the run restarted from its answer in ``result`` and its message."""
-    result['restarts'] = restarts
-    if restarts:
-        result['message'] = (f'{result.message} (the run restarted {restarts} time(s) from '
-                             'its answer at the iteration limit)')
+#: A stop test a run restarted after, in the result's message.
+RESTART_CAUSES = {'maxiter': 'at the iteration limit', 'ftol': 'after the ftol test',
+                  'xtol': 'after the xtol test', 'noise': 'after the noise test',
+                  'rho_min': 'at the smallest move limit',
+                  'bound_kkt': 'after the bound KKT test'}
+
+
+def _note_restarts(result: OptimizeResult, after: Sequence[str]) -> None:
+    """Note the run's restarts from its answer in ``result`` and its message.
+
+    ``restarts``: how often; ``restarted_after``: after which stop tests.
+    """
+    result['restarts'] = len(after)
+    result['restarted_after'] = list(after)
+    if after:
+        causes = ', '.join(RESTART_CAUSES.get(a, a) for a in after)
+        result['message'] = (f'{result.message} (the run restarted {len(after)} time(s) '
+                             f'from its answer: {causes})')
 
 
 def _run_from_answer(result: OptimizeResult, run: _Run) -> tuple[OptimizeResult, bool]:
@@ -897,9 +913,9 @@ def _continue_on_check_model(result: OptimizeResult, run: _Run, check_model: Ful
                                     'noise_g': float(check_noise[1])})
     first = len(result.history)
     second, cancelled = _run_from_answer(result, run)
-    # as the run itself does: at the iteration limit, once more from the answer
-    second, cancelled, restarts = _restart_at_limit(second, cancelled, run)
-    _note_restarts(second, int(result.get('restarts', 0)) + restarts)
+    # as the run itself does: after a restarting stop test, once more from the answer
+    second, cancelled, after = _restart_after_stop(second, cancelled, run)
+    _note_restarts(second, list(result.get('restarted_after', ())) + after)
     check.update(continued=True, continuations=1, first_iteration=first)
     if 'x_best' in second:
         # the answer's g is the check model's own: its verdict, on both sides
@@ -1563,19 +1579,19 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
                                           for row in g_check[:4 * n_c].reshape(n_c, 4)])
         return out
 
-    restarts = 0
-    # As in optimise: a run whose corrections learnt from its full runs and that ended at
-    # the iteration limit starts again from its answer (best_of), the
+    after: list[str] = []
+    # As in optimise: a run whose corrections learnt from its full runs and that ended by
+    # a restarting stop test starts again from its answer (best_of), the
     # corrections afresh there, Dynamic-Q with its first move limit.
-    while (corrections and not cancelled and restarts < correction_options.restarts
-           and result.get('stop_test') == 'maxiter'):
+    while (corrections and not cancelled and len(after) < correction_options.restarts
+           and result.get('stop_test') in correction_options.restart_after):
         found = best_of(0)
         if found is None:
             break
+        after.append(str(result['stop_test']))
         corrections.clear()
         result, cancelled = drive(start_at(np.asarray(records[found[0]]['x'], float)))
         nit += int(result.nit)
-        restarts += 1
     best = best_of(0)
     check: dict[str, Any] | None = None
     if best is not None and check_model is not None and not cancelled:
@@ -1628,7 +1644,7 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
                       condition_f_best=f_c.tolist(),
                       condition_g_best=g_c.tolist(), condition_metrics_best=metrics,
                       worst_condition=conditions.names[int(np.argmax(f_c))])
-    _note_restarts(result, restarts)
+    _note_restarts(result, after)
     if check is not None:
         result.update(check=check)
     return result

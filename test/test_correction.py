@@ -289,3 +289,26 @@ def test_a_run_that_ends_at_the_iteration_limit_restarts_once_from_its_answer():
     assert once.n_full_runs == 2 * never.n_full_runs - 1
     with pytest.raises(ValueError, match='restarts'):
         CorrectionOptions(restarts=-1)
+
+
+def test_a_run_that_stalls_in_f_while_still_stepping_restarts_after_the_ftol_test():
+    # The blind problem with a loose ftol (1e-2) and xtol off (1e-9): the first run
+    # stops by ftol with x1 at 0.85, its stale column learnt at the start.  Restarted
+    # after the ftol test (restart_after's default), the correction seeds x1's column
+    # at the answer and the run takes x1 to 0.55, f from 0.0234 to 0.0217 (the full
+    # model's optimum is x1 = 0.7, f 0.0 + (x0 - 0.3)^2); without the ftol test in
+    # restart_after the run stops at its first answer.
+    options = dict(OPTIONS, ftol=1e-2, xtol=1e-9)
+    kept = _run_blind(options, {'restart_after': ['maxiter']})
+    restarted = _run_blind(options, {})
+    assert kept.stop_test == 'ftol' and kept.restarts == 0
+    assert restarted.restarts == 1 and restarted.restarted_after == ['ftol']
+    assert restarted.message.endswith('(the run restarted 1 time(s) from its answer: '
+                                      'after the ftol test)')
+    assert restarted.f_best < kept.f_best
+    assert abs(restarted.x_best[1] - 0.7) < abs(kept.x_best[1] - 0.7)
+    assert CorrectionOptions().restart_after == ('maxiter', 'ftol')
+    with pytest.raises(ValueError, match=r'restart_after must be a list of stop tests '
+                                         r'\(maxiter, ftol, xtol, noise, rho_min, '
+                                         r"bound_kkt\), got \['often'\]"):
+        CorrectionOptions(restart_after=['often'])

@@ -100,6 +100,9 @@ Array = NDArray[np.float64]
 
 #: Values of ``CorrectionOptions.method``.
 CORRECTION_METHODS = ('secant', 'none')
+#: Stop tests a corrected run may restart after (``CorrectionOptions.restart_after``;
+#: Dynamic-Q's ``stop_test`` names).
+RESTARTABLE_STOPS = ('maxiter', 'ftol', 'xtol', 'noise', 'rho_min', 'bound_kkt')
 
 
 @dataclass(frozen=True)
@@ -126,11 +129,16 @@ class CorrectionOptions:
         Scenarios optimised without the correction, whatever ``method`` says: those
         whose full-model objective jumps with the design (module notes; 'mixed').
     restarts : int
-        A corrected run that ends at the iteration limit starts again from its answer
-        this many times at most, the correction started afresh there (a blind
+        A corrected run that ends by one of ``restart_after`` starts again from its
+        answer this many times at most, the correction started afresh there (a blind
         variable's column seeded again) and Dynamic-Q with its first move limit
         [E: 1, config/optimiser.yaml]; over a set of operating conditions every
         condition's correction starts afresh.
+    restart_after : tuple of str
+        The stop tests (:data:`RESTARTABLE_STOPS`) after which a corrected run restarts
+        [E: 'maxiter' and 'ftol', config/optimiser.yaml]: the iteration limit, and the
+        ftol test, which passes when f stalls while the steps are still longer than
+        xtol, as on a run creeping along the eq. 11 staircase.
     """
 
     method: str = 'secant'
@@ -140,6 +148,7 @@ class CorrectionOptions:
     verify_bounds: bool = True
     off_for_scenarios: tuple[str, ...] = ('mixed',)
     restarts: int = 1
+    restart_after: tuple[str, ...] = ('maxiter', 'ftol')
 
     def __post_init__(self) -> None:
         """Check the method, the steps and the restarts."""
@@ -163,6 +172,11 @@ class CorrectionOptions:
             raise ValueError(f'correction off_for_scenarios must be a list of scenario '
                              f'names, got {names!r}')
         object.__setattr__(self, 'off_for_scenarios', tuple(names))
+        stops = self.restart_after
+        if isinstance(stops, str) or not all(s in RESTARTABLE_STOPS for s in stops):
+            raise ValueError(f'correction restart_after must be a list of stop tests '
+                             f'({", ".join(RESTARTABLE_STOPS)}), got {stops!r}')
+        object.__setattr__(self, 'restart_after', tuple(stops))
 
     def applies_to(self, scenario: str) -> bool:
         """Whether a run of ``scenario`` with simplified gradients is corrected."""
@@ -178,6 +192,7 @@ class CorrectionOptions:
         """The options as a plain dict (records, run configurations)."""
         out = asdict(self)
         out['off_for_scenarios'] = list(self.off_for_scenarios)
+        out['restart_after'] = list(self.restart_after)
         return out
 
 
