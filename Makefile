@@ -50,6 +50,20 @@ $(STAMPS)/study-extra: requirements-study.txt $(STAMPS)/requirements
 	$(PY) -m pip install -q -r requirements-study.txt $(PIP_QUIET)
 	@touch $@
 
+# The upstream ros2 command line (ros2cli is not on PyPI), installed from the shared
+# tools beside the clone into build/ros2cli, outside the venv:
+#   PYTHONPATH=build/ros2cli build/ros2cli/bin/ros2 node list
+# test/test_ros2_cli.py uses it (and installs its own when it is absent).  Without the
+# shared tools the ros2 tests skip and say why.
+ROS2CLI_INSTALL := ../shared/tools/ros2cli/install.sh
+$(STAMPS)/ros2cli: $(STAMPS)/requirements
+	@if [ -f $(ROS2CLI_INSTALL) ]; then \
+		bash $(ROS2CLI_INSTALL) build/ros2cli $(abspath $(PY)) $(PIP_QUIET); \
+	else \
+		echo "$(ROS2CLI_INSTALL) not found: the ros2 command-line tests will be skipped"; \
+	fi
+	@touch $@
+
 # Foxglove's own decoding libraries (pinned in tools/foxglove/package-lock.json), installed
 # into tools/foxglove/node_modules: the tests decode recorded bags with them.  Without
 # npm on the machine those tests skip and say why.
@@ -67,7 +81,7 @@ lint: setup
 
 # The example project runs from its own folder, against the installed package and
 # the testing kit's pytest plugin, as a user's project would.
-test: lint $(STAMPS)/study-extra
+test: lint $(STAMPS)/study-extra $(STAMPS)/ros2cli
 	$(PY) -m pytest -n 2 --dist loadfile test
 	cd examples/custom_valve_controller && $(abspath $(PY)) -m pytest -n 2
 

@@ -1,9 +1,10 @@
 """The upstream ``ros2`` command line against ``graph``: the verbs a user tries first.
 
 ros2cli is not on PyPI; ``../shared/tools/ros2cli/install.sh`` (beside the clone, as
-in CI) installs the upstream sources (branch jazzy) into a directory of this module's
-own.  One ``graph --telemetry-rate 1.0`` (live telemetry) serves every test here, on the
-session's domain.  ``--no-daemon`` verbs discover the graph for ``--spin-time`` seconds:
+in CI) installs the upstream sources (branch jazzy): ``make test`` into build/ros2cli
+(:data:`PREBUILT`), else this module into a directory of its own.  One ``graph
+--telemetry-rate 1.0`` (live telemetry) serves every test here, on the session's
+domain.  ``--no-daemon`` verbs discover the graph for ``--spin-time`` seconds:
 Fast DDS discovery on a loaded machine needs a few (3 s was seen to miss
 the latched result topic and to leave a parameter call unanswered for 60 s).
 """
@@ -22,6 +23,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 INSTALL = ROOT.parent / 'shared' / 'tools' / 'ros2cli' / 'install.sh'
+#: ros2cli as ``make test`` installs it (Makefile, ``$(STAMPS)/ros2cli``), for this venv.
+PREBUILT = ROOT / 'build' / 'ros2cli'
 BIN = Path(sys.executable).parent
 NODES = ['/coordinator', '/full_vehicle_sim', '/gradient_evaluator', '/recorder',
          '/valve_controller']
@@ -41,12 +44,23 @@ pytestmark = [
 ]
 
 
+def _prebuilt_for_this_venv() -> bool:
+    """Whether build/ros2cli holds a ``ros2`` whose interpreter is this venv's python."""
+    script = PREBUILT / 'bin' / 'ros2'
+    if not script.is_file():
+        return False
+    first = script.read_text(encoding='utf-8', errors='replace').split('\n', 1)[0]
+    return first == f'#!{sys.executable}'
+
+
 @pytest.fixture(scope='module')
 def ros2(tmp_path_factory, ros_domain_id):
     """``ros2(*args, timeout=60)``: run the upstream ros2 command, its CompletedProcess."""
-    target = tmp_path_factory.mktemp('ros2cli')
-    subprocess.run([str(INSTALL), str(target), sys.executable], check=True,
-                   capture_output=True, text=True, timeout=600)
+    target = PREBUILT
+    if not _prebuilt_for_this_venv():
+        target = tmp_path_factory.mktemp('ros2cli')
+        subprocess.run([str(INSTALL), str(target), sys.executable], check=True,
+                       capture_output=True, text=True, timeout=600)
     env = {**os.environ, 'PYTHONPATH': str(target),
            'PATH': f'{BIN}{os.pathsep}{os.environ.get("PATH", "")}',
            'ROS_DOMAIN_ID': str(ros_domain_id), 'PYTHONUNBUFFERED': '1'}
