@@ -40,7 +40,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import OptimizeResult
 
-from suspension_tuning.optim.correction import CorrectionOptions, SecantCorrection
+from suspension_tuning.optim.correction import (
+    RESTART_CAUSES,
+    CorrectionOptions,
+    SecantCorrection,
+)
 from suspension_tuning.optim.dynamic_q import DynamicQ, DynamicQOptions
 from suspension_tuning.optim.finite_diff import central_difference
 from suspension_tuning.vehicle.design import (
@@ -672,21 +676,12 @@ def _restart_after_stop(result: OptimizeResult, cancelled: bool, run: _Run
     restarted after).
     """
     after: list[str] = []
-    options = run.correction_options
-    while (run.corrections[0] is not None and not cancelled
-           and len(after) < options.restarts
-           and result.get('stop_test') in options.restart_after and 'x_best' in result):
+    while (run.corrections[0] is not None and not cancelled and 'x_best' in result
+           and run.correction_options.restarts_after(result.get('stop_test'), len(after))):
         after.append(str(result['stop_test']))
         run.corrections[0] = None
         result, cancelled = _run_from_answer(result, run)
     return result, cancelled, after
-
-
-#: A stop test a run restarted after, in the result's message.
-RESTART_CAUSES = {'maxiter': 'at the iteration limit', 'ftol': 'after the ftol test',
-                  'xtol': 'after the xtol test', 'noise': 'after the noise test',
-                  'rho_min': 'at the smallest move limit',
-                  'bound_kkt': 'after the bound KKT test'}
 
 
 def _note_restarts(result: OptimizeResult, after: Sequence[str]) -> None:
@@ -1583,8 +1578,8 @@ def optimise_conditions(request: TuningRequest, model: ConditionModel,
     # As in optimise: a run whose corrections learnt from its full runs and that ended by
     # a restarting stop test starts again from its answer (best_of), the
     # corrections afresh there, Dynamic-Q with its first move limit.
-    while (corrections and not cancelled and len(after) < correction_options.restarts
-           and result.get('stop_test') in correction_options.restart_after):
+    while (corrections and not cancelled
+           and correction_options.restarts_after(result.get('stop_test'), len(after))):
         found = best_of(0)
         if found is None:
             break

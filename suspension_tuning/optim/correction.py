@@ -101,8 +101,13 @@ Array = NDArray[np.float64]
 #: Values of ``CorrectionOptions.method``.
 CORRECTION_METHODS = ('secant', 'none')
 #: Stop tests a corrected run may restart after (``CorrectionOptions.restart_after``;
-#: Dynamic-Q's ``stop_test`` names).
-RESTARTABLE_STOPS = ('maxiter', 'ftol', 'xtol', 'noise', 'rho_min', 'bound_kkt')
+#: Dynamic-Q's ``stop_test`` names), each in the words of a restarted run's message.
+RESTART_CAUSES = {'maxiter': 'at the iteration limit', 'ftol': 'after the ftol test',
+                  'xtol': 'after the xtol test', 'noise': 'after the noise test',
+                  'rho_min': 'at the smallest move limit',
+                  'bound_kkt': 'after the bound KKT test'}
+#: Their names.
+RESTARTABLE_STOPS = tuple(RESTART_CAUSES)
 
 
 @dataclass(frozen=True)
@@ -177,6 +182,13 @@ class CorrectionOptions:
             raise ValueError(f'correction restart_after must be a list of stop tests '
                              f'({", ".join(RESTARTABLE_STOPS)}), got {stops!r}')
         object.__setattr__(self, 'restart_after', tuple(stops))
+
+    def restarts_after(self, stop_test: str, done: int) -> bool:
+        """Whether a corrected run that ended by ``stop_test`` restarts from its answer.
+
+        ``done``: how often it has restarted already (at most :attr:`restarts` in all).
+        """
+        return done < self.restarts and stop_test in self.restart_after
 
     def applies_to(self, scenario: str) -> bool:
         """Whether a run of ``scenario`` with simplified gradients is corrected."""
