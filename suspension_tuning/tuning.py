@@ -44,6 +44,7 @@ from suspension_tuning.optim.correction import (
     RESTART_CAUSES,
     CorrectionOptions,
     SecantCorrection,
+    poorly_seen,
 )
 from suspension_tuning.optim.dynamic_q import DynamicQ, DynamicQOptions
 from suspension_tuning.optim.finite_diff import central_difference
@@ -600,6 +601,8 @@ class _Run:
     upper: Array
     options: Mapping[str, Any]
     staircase: Callable[[int], list[bool]]
+    #: The correction of the run that stopped, until the restart's first gradient.
+    previous_correction: Array | None = None
 
 
 def _drive(opt: DynamicQ, run: _Run, first_iteration: int) -> bool:
@@ -635,10 +638,18 @@ def _drive(opt: DynamicQ, run: _Run, first_iteration: int) -> bool:
                     if corrections[0] is None:
                         corrections[0] = SecantCorrection(full.size, n,
                                                           correction_options.min_step)
-                        if correction_options.seed_blind:
-                            seed_blind_columns(corrections[0], terms, x, full, values,
-                                               np.vstack([df, dg]),
-                                               correction_options.seed_step, upper)
+                        raw = np.vstack([df, dg])
+                        step = correction_options.seed_step
+                        blind = blind_columns(raw) if correction_options.seed_blind else []
+                        seed_columns(corrections[0], terms, x, full, values, raw, blind,
+                                     step, lower, upper)
+                        if run.previous_correction is not None:
+                            # a restart: the variables the stopped run found poorly seen
+                            seed_columns(corrections[0], terms, x, full, values, raw,
+                                         poorly_seen(run.previous_correction, raw,
+                                                     correction_options.reseed_ratio),
+                                         step, lower, upper, central=True)
+                            run.previous_correction = None
                     corrections[0].observe(x, full, values)
                     raw = np.vstack([df, dg])
                     jac = corrections[0].correct(raw)
@@ -671,14 +682,16 @@ def _restart_after_stop(result: OptimizeResult, cancelled: bool, run: _Run
     A run whose correction learnt from its full runs (the simplified models gave values)
     and that ended by one of ``correction_options.restart_after`` (the iteration limit,
     the ftol test) starts again, at most ``correction_options.restarts`` times: the
-    correction afresh at the answer (a blind variable's column seeded there again),
-    Dynamic-Q with its first move limit.  Returns (result, cancelled, the stop tests it
-    restarted after).
+    correction afresh at the answer (a blind variable's column seeded there again, and
+    the columns the stopped run's correction found the simplified models to see poorly,
+    ``reseed_ratio``), Dynamic-Q with its first move limit.  Returns (result, cancelled,
+    the stop tests it restarted after).
     """
     after: list[str] = []
     while (run.corrections[0] is not None and not cancelled and 'x_best' in result
            and run.correction_options.restarts_after(result.get('stop_test'), len(after))):
         after.append(str(result['stop_test']))
+        run.previous_correction = run.corrections[0].jacobian.copy()
         run.corrections[0] = None
         result, cancelled = _run_from_answer(result, run)
     return result, cancelled, after
@@ -991,24 +1004,46 @@ def with_noise_levels(options: Mapping[str, Any] | None, scenario: str,
     return out
 
 
-def seed_blind_columns(correction: SecantCorrection, terms: _ConstraintTerms, x: Array,
-                       full: Array, values: Array, jacobian: Array, step: float,
-                       upper: Array) -> None:
-    """Seed the correction's columns of the variables no simplified model sees.
+def blind_columns(jacobian: Array) -> Array:
+    """Variables no simplified model sees: columns of ``jacobian`` zero in every row.
 
-    A column of the simplified Jacobian that is exactly zero in every row (a bar in the
-    pitch-plane model, docs/design_space.md) gets one full run at ``x + step e_j``
-    (``- step`` where that leaves the box), counted as a full run of the optimisation.
+    (A bar in the pitch-plane model, docs/design_space.md.)
     """
-    blind = np.flatnonzero(np.all(np.asarray(jacobian, float) == 0.0, axis=0))
-    if blind.size == 0:
+    return np.flatnonzero(np.all(np.asarray(jacobian, float) == 0.0, axis=0))
+
+
+def seed_columns(correction: SecantCorrection, terms: _ConstraintTerms, x: Array,
+                 full: Array, values: Array, jacobian: Array, columns: ArrayLike,
+                 step: float, lower: Array, upper: Array, central: bool = False) -> None:
+    """Set the correction's ``columns`` from the full model's differences along them.
+
+    One-sided (``central`` False): one full run per variable j at ``x + step e_j``
+    (``- step`` where that leaves the box).  Central: two, at ``x +- step e_j``, where
+    both lie in the box (else one-sided): its error is O(step^2), which matters where
+    the slope is near zero (a variable near its own optimum, where a one-sided step of
+    0.1 on a curvature of 2 errs by 0.1).  Every run is counted as a full run of the
+    optimisation.  Each column becomes the full model's difference less the simplified
+    slope ``jacobian[:, j]`` (zero for a blind variable, :func:`blind_columns`).
+    """
+    columns = np.asarray(columns, dtype=int).reshape(-1)
+    if columns.size == 0:
         return
-    points = np.repeat(x[None, :], blind.size, axis=0)
-    steps = np.where(x[blind] + step <= upper[blind], step, -step)
-    points[np.arange(blind.size), blind] += steps
+    up = x[columns] + step <= upper[columns]
+    both = up & (x[columns] - step >= lower[columns]) & bool(central)
+    steps = np.where(up, step, -step)
+    points = np.repeat(x[None, :], columns.size + int(both.sum()), axis=0)
+    points[np.arange(columns.size), columns] += steps
+    points[columns.size + np.arange(int(both.sum())), columns[both]] -= step
     stepped = terms.stacked_values(points)
-    for row, (j, h) in enumerate(zip(blind, steps)):
-        correction.seed_column(int(j), x, float(h), full, stepped[row], values)
+    back = dict(zip(columns[both].tolist(), stepped[columns.size:]))
+    slopes = np.asarray(jacobian, float)
+    for row, (j, h) in enumerate(zip(columns, steps)):
+        if int(j) in back:  # (F(x + h) - F(x - h)) / 2h
+            correction.seed_column(int(j), x, 2.0 * float(h), back[int(j)], stepped[row],
+                                   values, slopes[:, j])
+        else:
+            correction.seed_column(int(j), x, float(h), full, stepped[row], values,
+                                   slopes[:, j])
 
 
 def verify_bounds(correction: SecantCorrection, terms: _ConstraintTerms, x: Array,
