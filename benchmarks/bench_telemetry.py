@@ -56,6 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     from sensor_msgs.msg import Imu
     from suspension_tuning_interfaces.action import Optimise
 
+    from suspension_tuning.nodes._spin import wait_future
     from suspension_tuning.nodes.full_vehicle_sim import TELEMETRY
 
     bags = tempfile.mkdtemp(prefix='bench_telemetry_')
@@ -87,12 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         for _ in range(args.goals):
             with lock:
                 received.clear()
-            handle = client.send_goal_async(goal)
-            while not handle.done():
-                time.sleep(0.05)
-            result = handle.result().get_result_async()
-            while not result.done():
-                time.sleep(0.05)
+            wait_future(wait_future(client.send_goal_async(goal)).get_result_async())
             time.sleep(1.0)  # the last messages in flight
             with lock:
                 times = list(received)

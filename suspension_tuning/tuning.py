@@ -635,10 +635,10 @@ def _drive(opt: DynamicQ, run: _Run, first_iteration: int) -> bool:
                 df, dg, values = terms.simplified_gradient(x, lower, upper)
                 full = evaluated.get(x.tobytes())
                 if correct and values is not None and full is not None:
+                    raw = np.vstack([df, dg])
                     if corrections[0] is None:
                         corrections[0] = SecantCorrection(full.size, n,
                                                           correction_options.min_step)
-                        raw = np.vstack([df, dg])
                         step = correction_options.seed_step
                         blind = blind_columns(raw) if correction_options.seed_blind else []
                         seed_columns(corrections[0], terms, x, full, values, raw, blind,
@@ -651,7 +651,6 @@ def _drive(opt: DynamicQ, run: _Run, first_iteration: int) -> bool:
                                          step, lower, upper, central=True)
                             run.previous_correction = None
                     corrections[0].observe(x, full, values)
-                    raw = np.vstack([df, dg])
                     jac = corrections[0].correct(raw)
                     if correction_options.verify_bounds and verify_bounds(
                             corrections[0], terms, x, full, values, raw, jac,
@@ -1035,15 +1034,14 @@ def seed_columns(correction: SecantCorrection, terms: _ConstraintTerms, x: Array
     points[np.arange(columns.size), columns] += steps
     points[columns.size + np.arange(int(both.sum())), columns[both]] -= step
     stepped = terms.stacked_values(points)
-    back = dict(zip(columns[both].tolist(), stepped[columns.size:]))
+    # each difference's far end is x + h; its near end x (span h) or x - h (span 2h)
+    near = np.repeat(np.asarray(full, float)[None, :], columns.size, axis=0)
+    near[both] = stepped[columns.size:]
+    spans = np.where(both, 2.0 * steps, steps)
     slopes = np.asarray(jacobian, float)
-    for row, (j, h) in enumerate(zip(columns, steps)):
-        if int(j) in back:  # (F(x + h) - F(x - h)) / 2h
-            correction.seed_column(int(j), x, 2.0 * float(h), back[int(j)], stepped[row],
-                                   values, slopes[:, j])
-        else:
-            correction.seed_column(int(j), x, float(h), full, stepped[row], values,
-                                   slopes[:, j])
+    for row, j in enumerate(columns):
+        correction.seed_column(int(j), x, float(spans[row]), near[row], stepped[row],
+                               values, slopes[:, j])
 
 
 def verify_bounds(correction: SecantCorrection, terms: _ConstraintTerms, x: Array,
