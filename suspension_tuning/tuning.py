@@ -603,6 +603,9 @@ class _Run:
     staircase: Callable[[int], list[bool]]
     #: The correction of the run that stopped, until the restart's first gradient.
     previous_correction: Array | None = None
+    #: The correction of the run continued on the check's model, until the
+    #: continuation's first gradient (``CorrectionOptions.carry_to_check``).
+    carried_correction: Array | None = None
 
 
 def _drive(opt: DynamicQ, run: _Run, first_iteration: int) -> bool:
@@ -650,6 +653,14 @@ def _drive(opt: DynamicQ, run: _Run, first_iteration: int) -> bool:
                                                      correction_options.reseed_ratio),
                                          step, lower, upper, central=True)
                             run.previous_correction = None
+                        if run.carried_correction is not None:
+                            # a continuation on the check's model: what the simplified
+                            # models miss, learnt on the run's model
+                            corrections[0].carry_columns(
+                                poorly_seen(run.carried_correction, raw,
+                                            correction_options.reseed_ratio),
+                                run.carried_correction)
+                            run.carried_correction = None
                     corrections[0].observe(x, full, values)
                     jac = corrections[0].correct(raw)
                     if correction_options.verify_bounds and verify_bounds(
@@ -904,7 +915,9 @@ def _continue_on_check_model(result: OptimizeResult, run: _Run, check_model: Ful
     (the continuation compares designs on one model), the check's run of the answer is
     the continuation's first evaluation (no new run), the secant correction starts
     afresh at the answer (what it learnt was the discrepancy to the other model, noise
-    included), and Dynamic-Q takes the check model's noise levels.  Extra constraints
+    included) but for the columns of the variables the simplified models see poorly,
+    which it keeps (``CorrectionOptions.carry_to_check``), and Dynamic-Q takes the check
+    model's noise levels.  Extra constraints
     on other scenarios keep their models and values.  The answer is that model's: its
     verdict is the check's.
     """
@@ -914,6 +927,8 @@ def _continue_on_check_model(result: OptimizeResult, run: _Run, check_model: Ful
     run.evaluated.clear()
     if run.correct:
         run.evaluated[x_best.tobytes()] = np.r_[f_c, g_c]
+        if run.corrections[0] is not None and run.correction_options.carry_to_check:
+            run = replace(run, carried_correction=run.corrections[0].jacobian.copy())
         run.corrections[0] = None
     if check_noise is not None:
         run = replace(run, options={**run.options, 'noise_f': float(check_noise[0]),

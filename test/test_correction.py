@@ -367,3 +367,51 @@ def test_a_restart_sets_the_column_of_a_dimly_seen_variable_from_the_full_model(
     # the restart's answer: x1 nearer the full model's 0.7, f lower
     assert abs(reseeded.x_best[1] - 0.7) < abs(plain.x_best[1] - 0.7)
     assert reseeded.f_best < 0.1 * plain.f_best
+
+
+def _wrong_sign(x, inputs):
+    """A simplified model whose x1 slope has the wrong sign near the optimum.
+
+    Its f is the full model's less x1 (slope 2 (x1 - 0.7) - 1: along the constraint it
+    pulls x1 up, where the full model pulls it down, as the roll-and-pitch model does
+    with the rear bar, docs/design_space.md); its g is the full model's, exact.
+    """
+    values = np.r_[(x[0] - 0.3) ** 2 + (x[1] - 0.7) ** 2 - x[1], x.sum() - 0.9]
+    return np.array([2.0 * (x[0] - 0.3), 2.0 * (x[1] - 0.7) - 1.0]), np.ones((1, 2)), values
+
+
+def test_a_continuation_on_the_check_model_keeps_the_poorly_seen_columns():
+    # Full model f = (x0 - 0.3)^2 + (x1 - 0.7)^2, g = x0 + x1 - 0.9; the check's model
+    # the same with g 0.05 higher, so the check refuses the first answer (0.25, 0.65)
+    # and the run goes on on the check's model to its optimum (0.225, 0.625), f =
+    # 2 x 0.075^2 = 0.01125 (hand calculation: (0.3, 0.7) projected on x0 + x1 = 0.85).
+    # The discrepancy D = x1 is linear, so the first run's correction is exact along
+    # x1: kept (carry_to_check), the continuation steps straight to the optimum (2
+    # evaluations); started at C = 0 it first follows the simplified slope up the
+    # boundary to (0.014, 0.836), f 0.1, and pays 2 runs more to learn D back.
+    def full(points):
+        p = np.atleast_2d(points)
+        return FullEvaluation(f=np.sum((p - BLIND_TARGET) ** 2, axis=1),
+                              g=(p.sum(axis=1) - 0.9)[:, None])
+
+    def check_model(points):
+        run = full(points)
+        return FullEvaluation(f=run.f, g=run.g + 0.05)
+
+    runs = {}
+    for carry in (False, True):
+        request = TuningRequest('ride', 2, x0=[0.9, 0.9], gradient_source='simplified',
+                                options=OPTIONS, correction={'carry_to_check': carry})
+        runs[carry] = optimise(request, full, _wrong_sign, check_model=check_model,
+                               check_gtol=1e-6, check_continue_by='tighter_model')
+    for result in runs.values():
+        assert result.check['continued'] and result.stop_test == 'xtol'
+        np.testing.assert_allclose(result.x_best, [0.225, 0.625], atol=1e-4)
+        assert result.f_best == pytest.approx(0.01125, rel=1e-3)
+    assert runs[True].correction['carried_columns'] == [0, 1]
+    assert runs[False].correction['carried_columns'] == []
+    assert runs[True].n_full_runs == runs[False].n_full_runs - 2
+    later = [r['x'] for r in runs[False].history[runs[False].check['first_iteration']:]]
+    assert later[1][1] > 0.8  # without: x1 up first, against the full model
+    with pytest.raises(ValueError, match='carry_to_check must be true or false, got 1'):
+        CorrectionOptions(carry_to_check=1)
