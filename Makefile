@@ -82,7 +82,7 @@ lint: setup
 # The example project runs from its own folder, against the installed package and
 # the testing kit's pytest plugin, as a user's project would.
 test: lint $(STAMPS)/study-extra $(STAMPS)/ros2cli
-	$(PY) -m pytest -n 2 --dist loadfile test
+	$(PY) -m pytest -n 2 --dist loadfile --no-loadscope-reorder test
 	cd examples/custom_valve_controller && $(abspath $(PY)) -m pytest -n 2
 
 demo: setup
