@@ -385,9 +385,10 @@ def test_a_continuation_on_the_check_model_keeps_the_poorly_seen_columns():
     # the same with g 0.05 higher, so the check refuses the first answer (0.25, 0.65)
     # and the run goes on on the check's model to its optimum (0.225, 0.625), f =
     # 2 x 0.075^2 = 0.01125 (hand calculation: (0.3, 0.7) projected on x0 + x1 = 0.85).
-    # The discrepancy D = x1 is linear, so the first run's correction is exact along
-    # x1: kept (carry_to_check), the continuation steps straight to the optimum (2
-    # evaluations); started at C = 0 it first follows the simplified slope up the
+    # The discrepancy D = x1 is linear, and the first run's secant has learnt it; both
+    # columns pass the poorly-seen test (Broyden shares a step's change between them)
+    # and are kept (carry_to_check): the continuation steps straight to the optimum (2
+    # evaluations).  Started at C = 0 it first follows the simplified slope up the
     # boundary to (0.014, 0.836), f 0.1, and pays 2 runs more to learn D back.
     def full(points):
         p = np.atleast_2d(points)
