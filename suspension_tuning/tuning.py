@@ -617,7 +617,6 @@ def _drive(opt: DynamicQ, run: _Run, first_iteration: int) -> bool:
     request, terms, evaluated, correct = run.request, run.terms, run.evaluated, run.correct
     correction_options, corrections = run.correction_options, run.corrections
     callback, counter, lower, upper = run.callback, run.counter, run.lower, run.upper
-    n = request.n_vars
     cancelled = False
     verified: dict[tuple[int, int], tuple[Array, float, Array, Array]] = {}
     while (ask := opt.ask()) is not None:
@@ -640,27 +639,7 @@ def _drive(opt: DynamicQ, run: _Run, first_iteration: int) -> bool:
                 if correct and values is not None and full is not None:
                     raw = np.vstack([df, dg])
                     if corrections[0] is None:
-                        corrections[0] = SecantCorrection(full.size, n,
-                                                          correction_options.min_step)
-                        step = correction_options.seed_step
-                        blind = blind_columns(raw) if correction_options.seed_blind else []
-                        seed_columns(corrections[0], terms, x, full, values, raw, blind,
-                                     step, lower, upper)
-                        if run.previous_correction is not None:
-                            # a restart: the variables the stopped run found poorly seen
-                            seed_columns(corrections[0], terms, x, full, values, raw,
-                                         poorly_seen(run.previous_correction, raw,
-                                                     correction_options.reseed_ratio),
-                                         step, lower, upper, central=True)
-                            run.previous_correction = None
-                        if run.carried_correction is not None:
-                            # a continuation on the check's model: what the simplified
-                            # models miss, learnt on the run's model
-                            corrections[0].carry_columns(
-                                poorly_seen(run.carried_correction, raw,
-                                            correction_options.reseed_ratio),
-                                run.carried_correction)
-                            run.carried_correction = None
+                        corrections[0] = _start_correction(run, x, full, values, raw)
                     corrections[0].observe(x, full, values)
                     jac = corrections[0].correct(raw)
                     if correction_options.verify_bounds and verify_bounds(
@@ -683,6 +662,34 @@ def _drive(opt: DynamicQ, run: _Run, first_iteration: int) -> bool:
             opt.stop('cancelled')
             cancelled = True
     return cancelled
+
+
+def _start_correction(run: _Run, x: Array, full: Array, values: Array, raw: Array
+                      ) -> SecantCorrection:
+    """A run's correction at its first corrected gradient, at ``x``.
+
+    The blind variables' columns seeded (``seed_blind``); at a restart, the columns the
+    stopped run found poorly seen set from the full model (``reseed_ratio``); on a
+    continuation on the check's model, those columns kept from the run continued
+    (``carry_to_check``).  ``full``, ``values``: the full and the scaled simplified
+    values at ``x``; ``raw``: the scaled simplified Jacobian there.
+    """
+    options = run.correction_options
+    correction = SecantCorrection(full.size, run.request.n_vars, options.min_step)
+    blind = blind_columns(raw) if options.seed_blind else []
+    seed_columns(correction, run.terms, x, full, values, raw, blind, options.seed_step,
+                 run.lower, run.upper)
+    if run.previous_correction is not None:
+        seed_columns(correction, run.terms, x, full, values, raw,
+                     poorly_seen(run.previous_correction, raw, options.reseed_ratio),
+                     options.seed_step, run.lower, run.upper, central=True)
+        run.previous_correction = None
+    if run.carried_correction is not None:
+        correction.carry_columns(
+            poorly_seen(run.carried_correction, raw, options.reseed_ratio),
+            run.carried_correction)
+        run.carried_correction = None
+    return correction
 
 
 def _restart_after_stop(result: OptimizeResult, cancelled: bool, run: _Run
